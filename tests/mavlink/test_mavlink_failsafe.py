@@ -38,12 +38,19 @@ def _rtl_when_navigating(address: str, flavour: str, stop: threading.Event, done
     m.close()
 
 
+#: The autopilot's RTL climbs to 3 m, not its default return altitude (ArduCopter RTL_ALT 15 m, PX4 RTL_RETURN_ALT
+#: 30 m): nothing below depends on the height, and climbing there and descending at the landing speed
+#: (0.5 / 0.7 m/s) was most of a failsafe test's flight.
+LOW_RTL = {"ardupilot": {"RTL_ALT": 300.0}, "px4": {"RTL_RETURN_ALT": 3.0}}
+
+
 @pytest.mark.e2e
 @pytest.mark.parametrize("flavour,action", [("ardupilot", "end"), ("px4", "end"), ("ardupilot", "resume"),
                                             ("px4", "hold")])
 def test_an_autopilot_failsafe_pauses_the_mission_and_on_failsafe_decides(ray_session, run_options, tmp_path,
                                                                             flavour, action):
-    emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path, params=PX4_AT_SPEED[flavour],
+    emu, env_path = _mavlink_variant("farm_survey", flavour, 10.0, tmp_path,
+                                     params={**PX4_AT_SPEED[flavour], **LOW_RTL[flavour]},
                                      mavlink={"on_failsafe": action})
     stop, done = threading.Event(), []
     th = threading.Thread(target=_rtl_when_navigating, args=(emu.address, flavour, stop, done), daemon=True)
@@ -129,6 +136,7 @@ def test_px4_offboard_loss_failsafe_is_not_undone_when_our_process_resumes(fly):
     b.guidance.goto((0.0, 0.0, 2.0))
     assert run_until(b, lambda: emu.snapshot()["mode"] == "OFFBOARD", 10), emu.mode_log
     assert run_until(b, lambda: dist(b.state().position, (0, 0, 2)) < 0.6, 40), b.state().position
+    b.close(safe_end=False)  # not the fixture's landing in 2x vehicle time: this test is over
 
 
 def test_px4_a_short_stall_of_ours_keeps_the_stream_and_offboard(fly):
@@ -161,3 +169,4 @@ def test_px4_a_short_stall_of_ours_keeps_the_stream_and_offboard(fly):
     assert [m for _, m in emu.mode_log][-1] == "OFFBOARD", emu.mode_log
     events = [e["event"] for e in b.drain_events()]
     assert not {"offboard_stream_stalled", "command_withheld", "autopilot_failsafe"} & set(events), events
+    b.close(safe_end=False)  # not the fixture's landing in real time: this test is over

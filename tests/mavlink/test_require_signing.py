@@ -11,7 +11,7 @@ import pytest
 
 from aerodaas.backends.base import CredentialsRefused
 from tests.inputs.test_app_errors_before_ray import _cli, _refused_before_ray, _write
-from tests.mavlink.emulated import position_ready, run_until
+from tests.mavlink.emulated import position_ready, run_until, with_max_speed
 from tests.mavlink.test_mavlink_signing import KEY, _key_file
 
 
@@ -117,6 +117,7 @@ def test_an_unsigned_survey_says_so_in_its_recording_and_summary(ray_session, ru
     from tests.runtime.test_backends_e2e import _mavlink_variant, _run_app
 
     emu, env_path = _mavlink_variant("farm_survey", "ardupilot", 10.0, tmp_path)
+    with_max_speed(env_path, 2.0)  # the whole survey, faster: what is judged does not depend on the flight
     try:
         res = _run_app("farm_survey", env_path, run_options, tmp_path / "farm.mcap")
     finally:

@@ -17,13 +17,16 @@ from tests.mavlink.test_mavlink_signing import KEY, OTHER_KEY, _key_file
 from tests.mavlink.test_mission_cli import SQUARE, _positions
 
 
-@pytest.fixture
-def signing_sim(tmp_path):
-    """``aerodaas sim`` (ArduPilot, 10x) with the key file of :data:`KEY`, in a process of its own; yields (its
-    address, the key file); stopped with SIGTERM after the test."""
-    key_file = _key_file(tmp_path / "vehicle.key")
+@pytest.fixture(scope="module")
+def signing_sim(tmp_path_factory):
+    """``aerodaas sim`` (ArduPilot, 4x) with the key file of :data:`KEY`, in a process of its own; yields (its
+    address, the key file); stopped with SIGTERM after this module's tests, which share it (each judges its own
+    exchange with the vehicle: none needs a vehicle nobody else has talked to). 4x, not 10x: the vehicle cancels a
+    mission upload after 5 x 1.5 of its seconds without an answer, 0.75 wall s at 10x, which a loaded machine (load
+    45) once starved the CLI for."""
+    key_file = _key_file(tmp_path_factory.mktemp("signing_sim") / "vehicle.key")
     p = subprocess.Popen([sys.executable, "-m", "aerodaas.cli", "sim", "--mavlink", "tcp:127.0.0.1:0", "--speedup",
-                          "10", "--home", "47.397742,8.545594,488", "--key-file", key_file],
+                          "4", "--home", "47.397742,8.545594,488", "--key-file", key_file],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = p.stdout.readline()
@@ -74,11 +77,12 @@ def test_mission_upload_and_download_sign_with_the_key_file(signing_sim, tmp_pat
 def test_mission_download_without_the_key_or_with_another_gets_nothing(signing_sim, tmp_path, capsys):
     address, _ = signing_sim
     out = tmp_path / "back.plan"
-    assert main(["mission", "download", "--connection", address, "--out", str(out), "--timeout", "3"]) == 2
+    # 2 s to reach the vehicle, not 3: both refusals below wait the whole of it (the vehicle is up, at 10x)
+    assert main(["mission", "download", "--connection", address, "--out", str(out), "--timeout", "2"]) == 2
     err = capsys.readouterr().err
     assert "not signed (no --key-file)" in err, err  # said, and the vehicle dropped what we sent
     other = _key_file(tmp_path / "other.key", OTHER_KEY)
-    assert main(["mission", "download", "--connection", address, "--out", str(out), "--timeout", "3",
+    assert main(["mission", "download", "--connection", address, "--out", str(out), "--timeout", "2",
                  "--key-file", other]) == 2
     assert "no correctly signed heartbeat from system 1" in capsys.readouterr().err
     assert not out.exists() and not (tmp_path / "back.plan.part").exists()
