@@ -52,14 +52,17 @@ class CommandProtocol:
         """Send COMMAND_LONG ``command`` (MAV_CMD number) with up to seven ``params`` and wait for its COMMAND_ACK
         (MAVLink command protocol). ``name`` is used in errors.
 
-        Each try waits ``timeout_s`` (default ``command_timeout_s``) wall seconds for the ACK; without one the
-        command is re-sent, up to ``retries`` (default ``command_retries``) times, with the ``confirmation``
-        counter raised, each time recorded as a ``command_resent`` event (``command``, ``attempt``, ``after``: "no
-        COMMAND_ACK" or the previous try's MAV_RESULT name, ``waited_s``: wall seconds since the first send).
-        MAV_RESULT_TEMPORARILY_REJECTED ("retrying later should work", MAV_RESULT) uses a try too: re-sent after
-        min(``timeout_s``, 0.5) s. After MAV_RESULT_IN_PROGRESS (the command runs; progress
-        ACKs follow) the command is not sent again (MAVLink command protocol): its final ACK is awaited until the
-        overall deadline of (``retries`` + 1) x ``timeout_s`` from the first send, which bounds every case.
+        Each try waits ``timeout_s`` (default ``command_timeout_s``) wall seconds from its own send for the ACK;
+        without one the command is re-sent, up to ``retries`` (default ``command_retries``) times, with the
+        ``confirmation`` counter raised, each time recorded as a ``command_resent`` event (``command``, ``attempt``,
+        ``after``: "no COMMAND_ACK" or the previous try's MAV_RESULT name, ``waited_s``: wall seconds since the first
+        send). The tries are counted, not fitted into a wall-clock budget (the MAVLink command protocol, "Command
+        Protocol" on mavlink.io: re-send after a timeout, a set number of times): a stall of our own process (a
+        loaded companion computer) never takes away the resends. An ACK received before a try's end is taken even
+        when our thread reads it late. MAV_RESULT_TEMPORARILY_REJECTED ("retrying later should work", MAV_RESULT)
+        uses a try too: re-sent after min(``timeout_s``, 0.5) s. After MAV_RESULT_IN_PROGRESS (the command runs;
+        progress ACKs follow) the command is not sent again (MAVLink command protocol): its final ACK is awaited
+        until (``retries`` + 1) x ``timeout_s`` from the first send, or that try's own end if later.
 
         Raises :class:`CommandRefused` (MAV_RESULT name, the autopilot's STATUSTEXT) for any final result but
         ACCEPTED, and for TEMPORARILY_REJECTED when the tries are used up; :class:`LinkLost` when the link is or
@@ -95,16 +98,15 @@ class CommandProtocol:
         last: Any = None  # the latest non-final answer: IN_PROGRESS or TEMPORARILY_REJECTED
         answer: Any = None  # the non-final answer of the try before this one, if it had one
         for attempt in range(retries + 1):
-            if time.monotonic() >= overall:
-                break
             if attempt:  # on the record: the caller waited meanwhile (a tick of the drone may have waited too)
                 self._event("command_resent", command=name, attempt=attempt,
                             after=_enum_name("MAV_RESULT", answer.result) if answer is not None else "no COMMAND_ACK",
                             waited_s=round(time.monotonic() - started, 3))
             sent = time.monotonic()
             self._link.send(lambda mav, attempt=attempt: send(mav, attempt))
-            accepted, latest, answer = self._await_ack(name, command, started, sent, min(sent + timeout, overall),
-                                                       overall, attempt == retries, min(timeout, _REJECTED_BACKOFF_S))
+            accepted, latest, answer = self._await_ack(name, command, started, sent, sent + timeout,
+                                                       max(overall, sent + timeout), attempt == retries,
+                                                       min(timeout, _REJECTED_BACKOFF_S))
             if accepted:
                 return
             last = latest if latest is not None else last
@@ -116,18 +118,19 @@ class CommandProtocol:
                    last_try: bool, backoff_s: float) -> tuple[bool, Any, Any]:
         """One try of :meth:`command_long`: wait for the COMMAND_ACK of ``command`` sent at ``sent`` until
         ``deadline`` (monotonic seconds); IN_PROGRESS moves that to ``overall`` (never re-sent), TEMPORARILY_REJECTED
-        to at most ``backoff_s`` from now (or ends the try on the ``last_try``). Returns (accepted, the try's latest
-        non-final ACK, its latest TEMPORARILY_REJECTED ACK). Raises CommandRefused for a refusing final result,
-        LinkLost when the link goes down."""
+        to at most ``backoff_s`` from now (or ends the try on the ``last_try``). The ACKs already received are read
+        before the try ends, however late this thread runs. Returns (accepted, the try's latest non-final ACK, its
+        latest TEMPORARILY_REJECTED ACK). Raises CommandRefused for a refusing final result, LinkLost when the link
+        goes down."""
         latest: Any = None
         rejected: Any = None
         while True:
             remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return False, latest, rejected
             try:
-                _, ack = self._acks.get(timeout=min(remaining, 0.05))
+                _, ack = self._acks.get(timeout=min(remaining, 0.05)) if remaining > 0 else self._acks.get_nowait()
             except queue.Empty:
+                if remaining <= 0:
+                    return False, latest, rejected
                 if not self._link.link_ok:
                     raise LinkLost(f"robot {self.robot_id!r}: {name}: link lost while waiting for COMMAND_ACK")
                 continue
