@@ -18,6 +18,8 @@ IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
 #: (label_studio_tools ``_build_cache_path``), then ``<uuid4()[:8]>-`` given to every uploaded file
 #: (label_studio ``data_import.models.upload_name_generator``); each 8 lower-case hex digits
 _TOOL_PREFIX = re.compile(r"^(?:[0-9a-f]{8}__)?(?:[0-9a-f]{8}-)?")
+#: a trailing frame number and the separators before it (``-000012`` of ``DJI_0025_cam1-000012``)
+_FRAME_SUFFIX = re.compile(r"[-_ .]*(\d+)$")
 
 
 def original_stem(stem: str) -> str:
@@ -34,13 +36,13 @@ def sequence_of(path: Path) -> str:
     by sequence, never by frame: neighbouring frames of one video are near copies and would leak into the
     validation set."""
     stem = original_stem(path.stem)
-    return re.sub(r"[-_ .]*\d+$", "", stem) or stem
+    return _FRAME_SUFFIX.sub("", stem) or stem
 
 
 def frame_number(path: Path) -> int:
     """The frame number an image's name ends in, after Label Studio's prefixes (:func:`original_stem`):
     ``3f2a9c1e-DJI_0025_cam1-000012.jpg`` -> 12; -1 for a name without one."""
-    m = re.search(r"(\d+)$", original_stem(path.stem))
+    m = _FRAME_SUFFIX.search(original_stem(path.stem))
     return int(m.group(1)) if m else -1
 
 
