@@ -438,7 +438,7 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     upload = " ".join(shlex.quote(a) for a in [*AERODAAS, "mission", "upload", str(plan), "--start", "--connection",
                                                 conn, "--timeout", "60", "--max-speed", "2"])
     # the observer follows the vehicle on its second link from before the upload (on the CLI's link it could only start
-    # once the CLI had left: at load 22 a PX4 at 5x had flown past the first waypoint by then, 2026-11-29)
+    # once the CLI had left, and on a loaded machine a PX4 at 5x had flown past the first waypoint by then)
     seen, ready, log = (shlex.quote(str(workdir / f)) for f in ("observed.json", "observer.ready", "observer.log"))
     observe = (f"( {py} -m tests.firmware.sitl_watchers observe {monitor_connection(autopilot)} {seen} 300 {ready} "
                f"> {log} 2>&1 & ) ; for k in $(seq 1 240); do [ -e {ready} ] && break; sleep 0.5; done ; ")

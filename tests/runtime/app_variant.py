@@ -5,20 +5,21 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 from aerodaas.config import load_environment_config
 
 from tests.conftest import REPO
 
-__all__ = ["variant_env"]
+__all__ = ["variant_data", "variant_env"]
 
 
-def variant_env(app: str, tmp_path: Path, *, drop_sensors: tuple[str, ...] = (),
-                camera: dict[str, dict] | None = None) -> Path:
-    """Write ``apps/<app>.json`` to ``tmp_path`` as parsed (its imagery paths resolved) with the sensors of ids
+def variant_data(app: str, *, drop_sensors: tuple[str, ...] = (),
+                 camera: dict[str, dict] | None = None) -> tuple[Any, dict]:
+    """``apps/<app>.json`` parsed (its imagery paths resolved) and as JSON data with the sensors of ids
     ``drop_sensors`` left out of its first robot and, for each ``camera`` id, those camera properties replaced
-    (``{"cam1": {"fps": 5}}``). Returns the variant's path. KeyError naming the id when the robot has no such sensor
-    (a test that thinks it drops or changes something it does not)."""
+    (``{"cam1": {"fps": 5}}``). Returns (the parsed, unchanged environment, the changed data). KeyError naming the id
+    when the robot has no such sensor (a test that thinks it drops or changes something it does not)."""
     cfg = load_environment_config(REPO / "apps" / f"{app}.json")
     data = cfg.model_dump(mode="json", exclude={"base_dir"})
     sensors = data["robots"][0]["sensors"]
@@ -29,6 +30,12 @@ def variant_env(app: str, tmp_path: Path, *, drop_sensors: tuple[str, ...] = (),
     sensors[:] = [s for s in sensors if s["id"] not in drop_sensors]
     for s in sensors:
         s["properties"].update((camera or {}).get(s["id"], {}))
+    return cfg, data
+
+
+def variant_env(app: str, tmp_path: Path, *, drop_sensors: tuple[str, ...] = (),
+                camera: dict[str, dict] | None = None) -> Path:
+    """:func:`variant_data`'s changed environment written to ``tmp_path``; returns the file's path."""
     path = tmp_path / f"{app}_variant.json"
-    path.write_text(json.dumps(data))
+    path.write_text(json.dumps(variant_data(app, drop_sensors=drop_sensors, camera=camera)[1]))
     return path

@@ -177,22 +177,17 @@ def _mavlink_variant(app: str, flavour: str, speedup: float, tmp_path, mavlink: 
     wait). ``mavlink``: more MavlinkConfig fields; ``params``: emulated autopilot parameters; ``without``: ids of
     sensors left out (a camera the app never reads: not in lock-step, a 15 FPS camera at 10x real time renders and
     records all the CPU it gets). Returns (emulator, path of the variant environment file)."""
-    from aerodaas.config import load_environment_config
     from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 
-    from tests.conftest import REPO
+    from tests.runtime.app_variant import variant_data
 
-    cfg = load_environment_config(REPO / "apps" / f"{app}.json")  # resolves imagery paths
+    cfg, data = variant_data(app, drop_sensors=without)
     robot = cfg.robots[0]
     # PX4's in-flight home-altitude correction on (the emulator's default, as the firmware): targets and the
     # missions built from waypoints go up with absolute altitudes (MAV_FRAME_GLOBAL, the take-off point's AMSL)
     emu = MavlinkVehicleEmulator(flavour, robot=robot, speedup=speedup, params=params)
     addr = emu.start("tcp:127.0.0.1:0")
-    data = cfg.model_dump(mode="json", exclude={"base_dir"})
     data["robots"][0].update(backend="mavlink", mavlink={"connection": addr, "autopilot": flavour, **(mavlink or {})})
-    sensors = data["robots"][0]["sensors"]
-    assert set(without) <= {x["id"] for x in sensors}, (without, sensors)
-    sensors[:] = [x for x in sensors if x["id"] not in without]
     data["simulation"].update(speedup=speedup, lockstep=False)
     path = tmp_path / f"{app}_{flavour}.json"
     path.write_text(json.dumps(data))
