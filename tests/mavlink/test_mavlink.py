@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as M
 
 from aerodaas.backends import CommandRefused, LinkLost
 from aerodaas.backends.mavlink import CommandNotAcknowledged, MavlinkBackend
@@ -178,8 +179,13 @@ def test_mission_round_trip_and_auto_flight(fly, autopilot):
     got = b.mission.download()
     assert got.items == sent
     assert emu.snapshot()["mission_len"] == len(sent) + (1 if autopilot == "ardupilot" else 0)  # ArduPilot: home
+    # the report of a mission stored before (stock PX4 SIH booted with its last mission in storage sends it after a
+    # new upload: that mission's last item, state NO_MISSION) and one of a finished mission: neither is progress
+    last = emu.snapshot()["mission_len"] - 1
+    for state in (M.MISSION_STATE_NO_MISSION, M.MISSION_STATE_COMPLETE):
+        emu.inject(M.MAVLink_mission_current_message(last, last + 1, state, 2))
     b.drain_events()
-    b.actions.arm()
+    b.actions.arm()  # acknowledged after the reports (one ordered link): they were read by then
     b.mission.start()
     track: list = []
     truth: list = []  # the emulator's own position
@@ -189,8 +195,11 @@ def test_mission_round_trip_and_auto_flight(fly, autopilot):
         truth.append(emu.snapshot()["position_origin"])  # from where it armed (PX4's home moves in flight)
 
     assert run_until(b, lambda: not b.state().armed and not b.state().in_air and len(track) > 50, 60, every=sample), b.state().position
-    reached = [e["item"] for e in b.drain_events() if e["event"] == "mission_item_reached"]
+    ev = b.drain_events()
+    reached = [e["item"] for e in ev if e["event"] == "mission_item_reached"]
     assert reached == [1, 2, 3, 4, 5]  # take-off, three waypoints, land: in order, each once
+    current = [e["item"] for e in ev if e["event"] == "mission_current"]
+    assert current == [1, 2, 3, 4, 5], current  # from the first item on, never the stored mission's last
     for wp in square:  # the vehicle went to every waypoint and held there; the backend saw it
         # PX4 resolves an item's height above home when it starts, and its home altitude moves after take-off
         # (COM_HOME_EN; up to home_alt_drift_m in the emulator), so the true height may be off by that much
@@ -404,8 +413,6 @@ def test_a_reached_item_makes_the_next_one_current_when_mission_current_is_lost(
     MISSION_CURRENT(k) that may still follow is no restart, and every item is reported reached once."""
     from types import SimpleNamespace as NS
 
-    from pymavlink.dialects.v20 import ardupilotmega as M
-
     b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
     b.link.autopilot = "px4"  # and a HEARTBEAT in PX4's AUTO.MISSION (main mode 4, sub mode 4)
     b.link.on_heartbeat(NS(base_mode=M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode=(4 << 16) | (4 << 24), type=2,
@@ -415,6 +422,7 @@ def test_a_reached_item_makes_the_next_one_current_when_mission_current_is_lost(
     # wire 0 take-off, 1 and 2 waypoints (ENU x, y, radius), 3 land; all autocontinue
     b.mission._waypoints = {1: (0.0, 0.0, 0.5), 2: (0.0, 10.0, 0.5)}
     b.mission._next = (frozenset({0, 1, 2, 3}), 4)
+    b.mission._started = b.mission._live = True  # uploaded, started, and running (state ACTIVE)
     def at(ms, east, north, up):  # a LOCAL_POSITION_NED sample (no global position): the vehicle is there
         b.telemetry.on_local_position_ned(NS(time_boot_ms=ms, x=north, y=east, z=-up, vx=0.0, vy=0.0, vz=0.0))
 

@@ -30,6 +30,19 @@ _RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE
 _ARRIVAL_RADIUS_M = 0.5
 
 
+def reports_the_running_mission(mission_state: int, mode: str) -> bool:
+    """Whether a MISSION_CURRENT describes a mission the autopilot is running: its ``mission_state`` (MAVLink
+    common ``MISSION_STATE``, a MAVLink 2 extension) is ``MISSION_STATE_ACTIVE``; from an autopilot that does not
+    report it (``MISSION_STATE_UNKNOWN``, 0), the vehicle's ``mode`` is AUTO (ArduPilot) or MISSION (PX4
+    AUTO.MISSION). A stored mission's MISSION_CURRENT is not the new one's progress: stock PX4 SIH booted with
+    the last mission it flew still in its storage reports that mission's last item (seq 5 of 6, state
+    ``MISSION_STATE_NO_MISSION``) after a new upload, until MISSION_START; ArduPilot reports
+    ``MISSION_STATE_NOT_STARTED`` (mavlink.io mission protocol, "Mission state"; both SITL firmwares, observed)."""
+    if mission_state:
+        return mission_state == M.MISSION_STATE_ACTIVE
+    return mode in ("AUTO", "MISSION")
+
+
 class AutopilotMission:
     """The vehicle's own mission: built from waypoints (or given as items), uploaded, downloaded, cleared and
     started over the mission protocol, and its progress reported as events.
@@ -45,7 +58,11 @@ class AutopilotMission:
     backend's lock, which guards the progress state; the I/O thread holds it while it feeds the handlers).
 
     State: the uploaded mission's NAV_WAYPOINTs by wire sequence number, its autocontinue items and length, the
-    current item, and the items whose arrival we reported and those the autopilot reported reached."""
+    current item, and the items whose arrival we reported and those the autopilot reported reached. The
+    autopilot's reports become progress once a MISSION_CURRENT says a mission runs
+    (:func:`reports_the_running_mission`), and after an upload of ours only once we started it (:meth:`start`): a
+    report about a stored or finished mission never marks the new mission's items reached. (A mission a ground
+    station uploaded and started reports its progress all the same.)"""
 
     def __init__(self, robot_id: str, *, link: MavlinkLink, telemetry: VehicleTelemetry, speed_limits: SpeedLimits,
                  commands: CommandProtocol, transfers: MissionTransfer, actions: VehicleAction,
@@ -62,6 +79,9 @@ class AutopilotMission:
         self._seq = -1  # the current item (wire seq)
         self._arrived: set[int] = set()  # mission wire seqs whose arrival we reported
         self._reached_fw: set[int] = set()  # mission wire seqs the autopilot reported reached
+        self._uploaded = False  # we uploaded a mission: only our start() makes the reports its progress
+        self._started = False  # start() was called since the last upload
+        self._live = False  # ... and a MISSION_CURRENT said the mission runs: the reports are its progress
         link.handle("MISSION_CURRENT", self.on_mission_current)
         link.handle("MISSION_ITEM_REACHED", self.on_mission_item_reached)
         telemetry.notify_positions(self)
@@ -185,6 +205,8 @@ class AutopilotMission:
             self._waypoints = wps
             self._next = (frozenset(k for k, w in enumerate(wire) if w[2]), len(wire))
             self._current_inferred_from = -1
+            self._seq = -1
+            self._uploaded, self._started, self._live = True, False, False
             self._arrived.clear()
             self._reached_fw.clear()
 
@@ -233,6 +255,8 @@ class AutopilotMission:
         events. Raises CredentialsRefused on an unsigned link when ``mavlink.require_signing``
         (:class:`SignedOnly`); as :meth:`CommandProtocol.command_long` / :meth:`CommandProtocol.set_mode`."""
         self._signed.require("start_mission")
+        with self._lock:  # a resume (start again without a new upload) keeps the progress it has
+            self._started = True
         self._offboard.stop()
         self._offboard.take_control()
         if self._telemetry.in_air:
@@ -248,7 +272,13 @@ class AutopilotMission:
             self._check_arrival()
 
     def on_mission_current(self, msg: Any) -> None:
-        """MISSION_CURRENT: the autopilot's current item. Caller holds the backend's lock (the I/O thread)."""
+        """MISSION_CURRENT: the autopilot's current item, from the first one that says the started mission runs
+        (see the class). Caller holds the backend's lock (the I/O thread)."""
+        if not self._live:
+            if not ((self._started or not self._uploaded) and reports_the_running_mission(getattr(msg, "mission_state", 0) or 0,
+                                                                  self._link.mode)):
+                return
+            self._live = True
         if msg.seq == self._current_inferred_from:
             return  # sent before the MISSION_ITEM_REACHED we already advanced on (see on_mission_item_reached)
         self._current_inferred_from = -1
@@ -288,8 +318,9 @@ class AutopilotMission:
     def on_mission_item_reached(self, msg: Any) -> None:
         """The autopilot's MISSION_ITEM_REACHED (after the item's hold): reported once per item and mission run
         (PX4 repeats it). For an item whose arrival :meth:`_check_arrival` already reported it becomes
-        ``mission_item_hold_done``, else ``mission_item_reached`` (take-off, or an item we do not track)."""
-        if msg.seq in self._reached_fw:
+        ``mission_item_hold_done``, else ``mission_item_reached`` (take-off, or an item we do not track). Ignored
+        before the started mission runs (see the class)."""
+        if not self._live or msg.seq in self._reached_fw:
             return
         self._reached_fw.add(msg.seq)
         name = "mission_item_hold_done" if msg.seq in self._arrived else "mission_item_reached"

@@ -198,8 +198,14 @@ class Telemetry:
             return e.battery_status_encode(0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LIPO, 32767, cells, -1, -1,
                                            -1, int(round(st.veh.battery_pct)))
         if msg_id == M.MAVLINK_MSG_ID_MISSION_CURRENT:
-            return e.mission_current_encode(min(self.store.seq, max(0, len(self.store.mission) - 1)), len(self.store.mission),
-                                            0, 0)
+            # the mission state as both firmwares report it (MISSION_STATE: none stored, uploaded and not started,
+            # running (also while paused in another mode), every item done); mission_mode 1: in the mission mode
+            store = self.store
+            state = (M.MISSION_STATE_NO_MISSION if not store.mission else
+                     {"running": M.MISSION_STATE_ACTIVE, "done": M.MISSION_STATE_COMPLETE}.get(
+                         store.run_state, M.MISSION_STATE_NOT_STARTED))
+            return e.mission_current_encode(min(store.seq, max(0, len(store.mission) - 1)), len(store.mission), state,
+                                            1 if st.mode in ("AUTO", "AUTO.MISSION") else 2)
         if msg_id == M.MAVLINK_MSG_ID_VFR_HUD:
             v = float(np.hypot(s.velocity[0], s.velocity[1]))
             return e.vfr_hud_encode(v, v, int(st.heading()), 50 if s.in_air else 0, float(st.geo().alt),
