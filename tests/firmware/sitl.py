@@ -414,7 +414,8 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     fresh parameters): the farm survey in GUIDED/OFFBOARD, the same with ``use_autopilot_mission``, ``aerodaas
     mission upload --start`` (then observed until it lands), the farm survey with a geofence exclusion around one
     corner (refused before anything flies), and the farm survey while the firmware is stopped for 6 s
-    (SIGSTOP/SIGCONT) in flight; on PX4 also our drone actor frozen in OFFBOARD (its failsafe) and the survey at
+    (SIGSTOP/SIGCONT) in flight; on PX4 also the autopilot mission once more on the same vehicle rebooted
+    (``auto_again``), our drone actor frozen in OFFBOARD (its failsafe) and the survey at
     0.5 m/s with SIH's ground truth observed (``slow``, :func:`tests.firmware.sitl_watchers.observe_truth`); ``only``: just these of them (by hand). Returns ``{name: {"rc", "out", "rec" or
     "observed"}}``."""
     from aerodaas.model.geo import enu_to_geodetic
@@ -456,35 +457,41 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
         "fence": [survey_step(autopilot, env_fence, workdir / "fence.mcap")],
         "linkloss": [stopper + survey_step(autopilot, env_guided, workdir / "linkloss.mcap")],
     }
+    # the app's mission again, after a reboot, on the vehicle that flew it (booted with its storage as it was:
+    # PX4 keeps the mission it flew, and reports that mission's last item after the new upload); ArduCopter's -w
+    # wipes its storage, so only PX4
+    again = {"auto_again": "auto"} if autopilot == "px4" else {}
+    if again:
+        scenarios["auto_again"] = [survey_step(autopilot, env_auto, workdir / "auto_again.mcap")]
     if autopilot == "px4":  # PX4's offboard-loss failsafe; ArduCopter has none in GUIDED with stock parameters
         scenarios["failsafe"] = [freezer + survey_step(autopilot, env_guided, workdir / "failsafe.mcap")]
         # the farm survey's own 0.5 m/s on stock PX4 SIH, with SIH's ground truth observed: a limit that cannot hold
         slow = small_cameras(mavlink_env(autopilot, FARM_ENV))
         slow["robots"][0]["limits"]["max_speed"] = 0.5
-        truth = (f"( {py} -m tests.firmware.sitl_watchers observe-truth {monitor_connection(autopilot)} "
-                 f"{shlex.quote(str(workdir / 'truth.json'))} 300 > {shlex.quote(str(workdir / 'truth.log'))} 2>&1 & ) ; ")
-        # (the observer stops 1 s after the disarm: wait for its file, not a fixed time)
-        wait = "; rc=$?; for k in $(seq 1 60); do [ -e {} ] && break; sleep 0.5; done; exit $rc"
-        scenarios["slow"] = [truth + survey_step(autopilot, _write_env(workdir / "slow.json", slow),
-                                                 workdir / "slow.mcap") + wait.format(shlex.quote(str(workdir / "truth.json")))]
-        # ... and the guided survey at MAX_SPEED, its ground truth observed the same way
-        scenarios["guided"] = [truth.replace("truth.json", "truth_guided.json").replace("truth.log", "truth_guided.log")
-                               + scenarios["guided"][0] + wait.format(shlex.quote(str(workdir / "truth_guided.json")))]
+        def observed(name: str, step: str) -> str:  # with SIH's ground truth observed beside it (truth_<name>.json)
+            f = shlex.quote(str(workdir / f"truth_{name}.json"))  # the observer stops 1 s after the disarm: wait
+            return (f"( {py} -m tests.firmware.sitl_watchers observe-truth {monitor_connection(autopilot)} {f} 300 > "
+                    f"{shlex.quote(str(workdir / f'truth_{name}.log'))} 2>&1 & ) ; {step}; rc=$?; "
+                    f"for k in $(seq 1 60); do [ -e {f} ] && break; sleep 0.5; done; exit $rc")
+        scenarios["slow"] = [observed("slow", survey_step(autopilot, _write_env(workdir / "slow.json", slow),
+                                                          workdir / "slow.mcap"))]
+        for name in ("guided", "auto", "linkloss"):  # ... and the surveys at MAX_SPEED
+            scenarios[name] = [observed(name, scenarios[name][0])]
     out: dict[str, Any] = {}
     for name, steps in scenarios.items():
         if only is not None and name not in only:
             continue
-        d = workdir / name
+        d = workdir / again.get(name, name)
         run_in_namespace(autopilot, d, steps, with_firmware=name != "fence")
         for k, step in enumerate(steps):
             rc, text = step_result(d, k)
             out[name if k == 0 else "observe"] = {"rc": rc, "out": text}
-    for name in ("guided", "auto", "linkloss", "failsafe", "slow"):
+    for name in ("guided", "auto", "auto_again", "linkloss", "failsafe", "slow"):
         if name in out:
             out[name]["rec"] = _read_or_note(workdir / f"{name}.mcap")
-    for name, f in (("slow", "truth.json"), ("guided", "truth_guided.json")):
-        if name in out and (workdir / f).exists():
-            out[name]["truth"] = json.loads((workdir / f).read_text())
+    for name in ("slow", "guided", "auto", "linkloss"):
+        if name in out and (workdir / f"truth_{name}.json").exists():
+            out[name]["truth"] = json.loads((workdir / f"truth_{name}.json").read_text())
     modes = workdir / "failsafe_modes.json"
     if "failsafe" in out:
         out["failsafe"]["firmware"] = json.loads(modes.read_text()) if modes.exists() else {}

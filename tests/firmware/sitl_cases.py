@@ -104,11 +104,31 @@ def test_farm_survey_from_a_cold_vehicle(session, autopilot):
           f"visits {[round(v['closest_m'], 3) for v in visits]}")
 
 
+def fastest_true_second(truth: dict, speedup: float) -> tuple[float, int]:
+    """SIH's ground truth (:func:`tests.firmware.sitl_watchers.observe_truth`): the fastest mean horizontal speed
+    (m/s) over 1 s of vehicle time while airborne (0.5 m above the first sample), and how many airborne samples.
+    1 s of vehicle time is 1 / ``speedup`` seconds of the observer's clock (HIL_STATE_QUATERNION carries no time
+    stamp on SIH); windows with fewer than two samples (the firmware stopped) are left out."""
+    import numpy as np
+
+    t = np.array(truth["truth"])
+    if not len(t):
+        return 0.0, 0
+    air = t[t[:, 2] > t[0, 2] + 0.5]
+    w = 1.0 / speedup
+    means = [float(air[(air[:, 0] >= a) & (air[:, 0] < a + w), 1].mean()) for a in air[:, 0]
+             if a + w <= air[-1, 0] and ((air[:, 0] >= a) & (air[:, 0] < a + w)).sum() >= 2]
+    return max(means, default=0.0), len(air)
+
+
 @pytest.mark.parametrize("run", ["guided", "auto", "linkloss"])
 def test_speed_stays_within_the_limit(session, run, autopilot):
-    """The robot's max_speed (sitl.MAX_SPEED: ArduCopter 0.5, PX4 2 m/s) + 10 %, from the recorded odometry: the vehicle's own velocity and the
-    distance flown over every >= 4 s of vehicle time (shorter windows measure the jitter between a position's
-    arrival and its time stamp: up to one 0.1 s stream period)."""
+    """The robot's max_speed (sitl.MAX_SPEED: ArduCopter 0.5, PX4 2 m/s) + 10 %. ArduCopter: from the recorded
+    odometry, the vehicle's own velocity and the distance flown over every >= 4 s of vehicle time (shorter windows
+    measure the jitter between a position's arrival and its time stamp: up to one 0.1 s stream period). Stock PX4
+    SIH: from SIH's own ground truth, the mean over every 1 s of vehicle time (:func:`fastest_true_second`), since
+    its estimate is not what flew: EKF2 (its default noise, not SIH's) let the position estimate stall for 3.5 s
+    and then caught up 2.6 m in 1.5 s, a reported 2.2-2.3 m/s at MPC_XY_VEL_MAX 1.75 in AUTO (2026-11-29)."""
     rec = session[run]["rec"]
     odo = odometry(rec)
     assert len(odo) > 100, session[run]["out"][-2000:]
@@ -119,10 +139,16 @@ def test_speed_stays_within_the_limit(session, run, autopilot):
     back = [e["t"] for e in ev if e["event"] == "link_regained"]
     pieces = [odo] if not lost else [[o for o in odo if o["t"] < lost[0] - 2.0],
                                      [o for o in odo if o["t"] > (back[-1] if back else 1e9) + 3.0]]
-    v_flown = max(max_horizontal_speed(p, window_s=4.0) for p in pieces)
+    v_flown = max(flown_speed(p, 4.0) for p in pieces)
     limit = sitl.MAX_SPEED[autopilot]
-    print(f"{autopilot} {run}: max speed reported {v_reported:.3f} m/s, flown {v_flown:.3f} m/s (limit {limit})")
-    assert v_reported <= limit * 1.1 and v_flown <= limit * 1.1
+    print(f"{autopilot} {run}: max speed reported {v_reported:.3f} m/s, flown over 4 s {v_flown:.3f} m/s "
+          f"(limit {limit})")
+    if autopilot == "px4":
+        v_true, n = fastest_true_second(session[run].get("truth", {"truth": []}), sitl.SPEEDUP["px4"])
+        print(f"px4 {run}: ground truth, fastest 1 s {v_true:.3f} m/s over {n} airborne samples")
+        assert n > 300 and v_true <= limit * 1.1
+    else:
+        assert v_reported <= limit * 1.1 and v_flown <= limit * 1.1
 
 
 def test_hover_height_from_the_firmware_estimate(session, autopilot):
