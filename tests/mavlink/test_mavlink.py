@@ -443,6 +443,39 @@ def test_a_reached_item_makes_the_next_one_current_when_mission_current_is_lost(
                   ("mission_item_reached", 2), ("mission_item_hold_done", 2), ("mission_current", 3)], ev
 
 
+def test_after_the_start_only_a_report_of_the_running_mission_is_progress():
+    """Uploaded and started: a MISSION_CURRENT that arrives before the autopilot runs the new mission (a stored
+    mission's last item, NO_MISSION, as a rebooted PX4 sends it; or with no state, from an older autopilot, while
+    it is still in LOITER) is no progress; the first report in state ACTIVE is, and from then on every one."""
+    from types import SimpleNamespace as NS
+
+    b = MavlinkBackend(RobotConfig(id="q", backend="mavlink", home=CONFIG_HOME, mavlink=MavlinkConfig()))
+    b.link.autopilot = "px4"
+
+    def heartbeat(main_mode: int, sub_mode: int) -> None:  # PX4's custom mode: AUTO (4) .LOITER (3) / .MISSION (4)
+        b.link.on_heartbeat(NS(base_mode=M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode=(main_mode << 16)
+                               | (sub_mode << 24), type=2, autopilot=M.MAV_AUTOPILOT_PX4, system_status=3,
+                               get_type=lambda: "HEARTBEAT"), 0.0)
+
+    heartbeat(4, 3)
+    assert b.state().mode == "LOITER"
+    b.mission._uploaded = b.mission._started = True  # the state after upload() and start(): nothing reported yet
+    b.drain_events()
+    with b._lock:
+        b.mission.on_mission_current(NS(seq=5, mission_state=M.MISSION_STATE_NO_MISSION))
+        b.mission.on_mission_current(NS(seq=5, mission_state=0))  # no state, and not in the mission mode
+        b.mission.on_mission_item_reached(NS(seq=4))
+    assert [e for e in b.drain_events() if e["event"].startswith("mission_")] == []
+    with b._lock:
+        b.mission.on_mission_current(NS(seq=0, mission_state=M.MISSION_STATE_ACTIVE))
+        b.mission.on_mission_item_reached(NS(seq=0))
+    heartbeat(4, 3)  # paused in LOITER: the running mission's reports stay its progress
+    with b._lock:
+        b.mission.on_mission_current(NS(seq=1, mission_state=M.MISSION_STATE_PAUSED))
+    ev = [(e["event"], e.get("seq")) for e in b.drain_events() if e["event"].startswith("mission_")]
+    assert ev == [("mission_current", 0), ("mission_item_reached", 0), ("mission_current", 1)], ev
+
+
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)
 @pytest.mark.parametrize("firmware", ["unsupported", "no_ack"])
 def test_message_interval_refused_falls_back_to_request_data_stream(fly, autopilot, firmware):

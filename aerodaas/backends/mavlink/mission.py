@@ -34,10 +34,13 @@ def reports_the_running_mission(mission_state: int, mode: str) -> bool:
     """Whether a MISSION_CURRENT describes a mission the autopilot is running: its ``mission_state`` (MAVLink
     common ``MISSION_STATE``, a MAVLink 2 extension) is ``MISSION_STATE_ACTIVE``; from an autopilot that does not
     report it (``MISSION_STATE_UNKNOWN``, 0), the vehicle's ``mode`` is AUTO (ArduPilot) or MISSION (PX4
-    AUTO.MISSION). A stored mission's MISSION_CURRENT is not the new one's progress: stock PX4 SIH booted with
-    the last mission it flew still in its storage reports that mission's last item (seq 5 of 6, state
-    ``MISSION_STATE_NO_MISSION``) after a new upload, until MISSION_START; ArduPilot reports
-    ``MISSION_STATE_NOT_STARTED`` (mavlink.io mission protocol, "Mission state"; both SITL firmwares, observed)."""
+    AUTO.MISSION). Sources: mavlink.io mission protocol, "Mission state"; PX4 reports ACTIVE only while its
+    navigator flies the mission (AUTO_MISSION, and the take-off and landing states it enters from it), NO_MISSION
+    while the stored mission is not valid, PAUSED in other modes (``MavlinkMissionManager::update_mission_state``,
+    src/modules/mavlink/mavlink_mission.cpp); ArduPilot ACTIVE while its mission runs, NOT_STARTED when stopped,
+    which leaving AUTO does (``GCS_MAVLINK::mission_state``, libraries/GCS_MAVLink/GCS_Common.cpp;
+    ``ModeAuto::exit``). Before that state, a MISSION_CURRENT may be a mission stored earlier: a PX4 rebooted with
+    its last mission reports that one's last item after a new upload, until MISSION_START."""
     if mission_state:
         return mission_state == M.MISSION_STATE_ACTIVE
     return mode in ("AUTO", "MISSION")
@@ -61,8 +64,9 @@ class AutopilotMission:
     current item, and the items whose arrival we reported and those the autopilot reported reached. The
     autopilot's reports become progress once a MISSION_CURRENT says a mission runs
     (:func:`reports_the_running_mission`), and after an upload of ours only once we started it (:meth:`start`): a
-    report about a stored or finished mission never marks the new mission's items reached. (A mission a ground
-    station uploaded and started reports its progress all the same.)"""
+    report about a stored or finished mission never marks the new mission's items reached. Where this backend
+    uploaded nothing, a mission a ground station uploaded and started reports its progress all the same; after an
+    upload of ours, only our start counts."""
 
     def __init__(self, robot_id: str, *, link: MavlinkLink, telemetry: VehicleTelemetry, speed_limits: SpeedLimits,
                  commands: CommandProtocol, transfers: MissionTransfer, actions: VehicleAction,
@@ -142,6 +146,8 @@ class AutopilotMission:
             self._actions.pin_altitude_reference()
         wire, sent_items = self._wire_items(items, built, absolute)
         self._link.check_link("mission upload")
+        with self._lock:  # closed before the transfer: the vehicle may announce the new mission with its ACK
+            self._uploaded, self._started, self._live, self._seq = True, False, False, -1
         self._transfers.upload_mission(wire)
         self._remember_waypoints(wire)
         self._event("mission_uploaded", count=len(sent_items))
@@ -205,8 +211,6 @@ class AutopilotMission:
             self._waypoints = wps
             self._next = (frozenset(k for k, w in enumerate(wire) if w[2]), len(wire))
             self._current_inferred_from = -1
-            self._seq = -1
-            self._uploaded, self._started, self._live = True, False, False
             self._arrived.clear()
             self._reached_fw.clear()
 
@@ -222,12 +226,6 @@ class AutopilotMission:
         got = self._transfers.download_messages(0, "mission download")
         items = []
         first = 1 if self._link.autopilot == "ardupilot" else 0
-        # PX4 starts an item's hold when its own reached check passes: horizontal distance within the item's
-        # acceptance radius (navigator mission_block.cpp is_mission_item_reached, Navigator::get_acceptance_radius),
-        # so its arrival radius is that one; stock PX4 SIH then holds 0.6-0.7 m from the waypoint at times and never
-        # came within 0.5 m at one corner of a CI run (no arrival, so the hold had no start). ArduCopter's at most
-        # _ARRIVAL_RADIUS_M
-        px4 = self._link.autopilot == "px4"
         for seq in sorted(got):
             if seq < first:
                 continue
@@ -275,8 +273,8 @@ class AutopilotMission:
         """MISSION_CURRENT: the autopilot's current item, from the first one that says the started mission runs
         (see the class). Caller holds the backend's lock (the I/O thread)."""
         if not self._live:
-            if not ((self._started or not self._uploaded) and reports_the_running_mission(getattr(msg, "mission_state", 0) or 0,
-                                                                  self._link.mode)):
+            ours = self._started or not self._uploaded
+            if not (ours and reports_the_running_mission(getattr(msg, "mission_state", 0) or 0, self._link.mode)):
                 return
             self._live = True
         if msg.seq == self._current_inferred_from:

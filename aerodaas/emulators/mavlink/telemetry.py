@@ -198,14 +198,23 @@ class Telemetry:
             return e.battery_status_encode(0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LIPO, 32767, cells, -1, -1,
                                            -1, int(round(st.veh.battery_pct)))
         if msg_id == M.MAVLINK_MSG_ID_MISSION_CURRENT:
-            # the mission state as both firmwares report it (MISSION_STATE: none stored, uploaded and not started,
-            # running (also while paused in another mode), every item done); mission_mode 1: in the mission mode
+            # mission_state and mission_mode as the firmwares report them (mission.py reports_the_running_mission):
+            # running in the mission mode ACTIVE; running in another mode PX4 PAUSED, ArduPilot NOT_STARTED (leaving
+            # AUTO stops its mission); mission_mode 1 in the mission mode, else PX4 2 (suspended), ArduPilot 0
             store = self.store
-            state = (M.MISSION_STATE_NO_MISSION if not store.mission else
-                     {"running": M.MISSION_STATE_ACTIVE, "done": M.MISSION_STATE_COMPLETE}.get(
-                         store.run_state, M.MISSION_STATE_NOT_STARTED))
+            in_mission = st.mode in ("AUTO", "AUTO.MISSION")
+            if not store.mission:
+                state = M.MISSION_STATE_NO_MISSION
+            elif store.run_state == "done":
+                state = M.MISSION_STATE_COMPLETE
+            elif store.run_state == "running" and in_mission:
+                state = M.MISSION_STATE_ACTIVE
+            elif store.run_state == "running" and st.px4:
+                state = M.MISSION_STATE_PAUSED
+            else:
+                state = M.MISSION_STATE_NOT_STARTED
             return e.mission_current_encode(min(store.seq, max(0, len(store.mission) - 1)), len(store.mission), state,
-                                            1 if st.mode in ("AUTO", "AUTO.MISSION") else 2)
+                                            1 if in_mission else (2 if st.px4 else 0))
         if msg_id == M.MAVLINK_MSG_ID_VFR_HUD:
             v = float(np.hypot(s.velocity[0], s.velocity[1]))
             return e.vfr_hud_encode(v, v, int(st.heading()), 50 if s.in_air else 0, float(st.geo().alt),
