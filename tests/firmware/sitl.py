@@ -457,26 +457,26 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
         "fence": [survey_step(autopilot, env_fence, workdir / "fence.mcap")],
         "linkloss": [stopper + survey_step(autopilot, env_guided, workdir / "linkloss.mcap")],
     }
-    # the app's mission again, after a reboot, on the vehicle that flew it (booted with its storage as it was:
-    # PX4 keeps the mission it flew, and reports that mission's last item after the new upload); ArduCopter's -w
-    # wipes its storage, so only PX4
+    # the app's mission again on the vehicle that flew it, rebooted with its storage (PX4 keeps the mission it flew
+    # and reports its last item after the new upload); ArduCopter's -w wipes its storage, so only PX4
     again = {"auto_again": "auto"} if autopilot == "px4" else {}
-    if again:
-        scenarios["auto_again"] = [survey_step(autopilot, env_auto, workdir / "auto_again.mcap")]
+    scenarios.update({name: [survey_step(autopilot, env_auto, workdir / f"{name}.mcap")] for name in again})
     if autopilot == "px4":  # PX4's offboard-loss failsafe; ArduCopter has none in GUIDED with stock parameters
         scenarios["failsafe"] = [freezer + survey_step(autopilot, env_guided, workdir / "failsafe.mcap")]
         # the farm survey's own 0.5 m/s on stock PX4 SIH, with SIH's ground truth observed: a limit that cannot hold
         slow = small_cameras(mavlink_env(autopilot, FARM_ENV))
         slow["robots"][0]["limits"]["max_speed"] = 0.5
-        def observed(name: str, step: str) -> str:  # with SIH's ground truth observed beside it (truth_<name>.json)
+        def observed(name: str, step: str, stop: str = "") -> str:  # with SIH's truth beside it (truth_<name>.json)
             f = shlex.quote(str(workdir / f"truth_{name}.json"))  # the observer stops 1 s after the disarm: wait
-            return (f"( {py} -m tests.firmware.sitl_watchers observe-truth {monitor_connection(autopilot)} {f} 300 > "
-                    f"{shlex.quote(str(workdir / f'truth_{name}.log'))} 2>&1 & ) ; {step}; rc=$?; "
+            return (f"( {py} -m tests.firmware.sitl_watchers observe-truth {monitor_connection(autopilot)} {f} 300"
+                    f"{stop} > {shlex.quote(str(workdir / f'truth_{name}.log'))} 2>&1 & ) ; {step}; rc=$?; "
                     f"for k in $(seq 1 60); do [ -e {f} ] && break; sleep 0.5; done; exit $rc")
         scenarios["slow"] = [observed("slow", survey_step(autopilot, _write_env(workdir / "slow.json", slow),
                                                           workdir / "slow.mcap"))]
-        for name in ("guided", "auto", "linkloss"):  # ... and the surveys at MAX_SPEED
+        for name in ("guided", "auto"):  # ... and the surveys at MAX_SPEED; the link loss's stop by the observer
             scenarios[name] = [observed(name, scenarios[name][0])]
+        scenarios["linkloss"] = [observed("linkloss", survey_step(autopilot, env_guided, workdir / "linkloss.mcap"),
+                                          " $FW0 3 6")]
     out: dict[str, Any] = {}
     for name, steps in scenarios.items():
         if only is not None and name not in only:

@@ -126,9 +126,10 @@ def test_speed_stays_within_the_limit(session, run, autopilot):
     """The robot's max_speed (sitl.MAX_SPEED: ArduCopter 0.5, PX4 2 m/s) + 10 %. ArduCopter: from the recorded
     odometry, the vehicle's own velocity and the distance flown over every >= 4 s of vehicle time (shorter windows
     measure the jitter between a position's arrival and its time stamp: up to one 0.1 s stream period). Stock PX4
-    SIH: from SIH's own ground truth, the mean over every 1 s of vehicle time (:func:`fastest_true_second`), since
-    its estimate is not what flew: EKF2 (its default noise, not SIH's) let the position estimate stall for 3.5 s
-    and then caught up 2.6 m in 1.5 s, a reported 2.2-2.3 m/s at MPC_XY_VEL_MAX 1.75 in AUTO (2026-11-29)."""
+    SIH: from SIH's own ground truth, the mean over every 1 s of vehicle time
+    (:func:`fastest_true_second`), since its estimate is not what flew: EKF2 (its default noise, not SIH's) let the
+    position estimate stall for 3.5 s and then caught up 2.6 m in 1.5 s, a reported 2.2-2.3 m/s at MPC_XY_VEL_MAX
+    1.75 in AUTO (2026-11-29)."""
     rec = session[run]["rec"]
     odo = odometry(rec)
     assert len(odo) > 100, session[run]["out"][-2000:]
@@ -144,7 +145,8 @@ def test_speed_stays_within_the_limit(session, run, autopilot):
     print(f"{autopilot} {run}: max speed reported {v_reported:.3f} m/s, flown over 4 s {v_flown:.3f} m/s "
           f"(limit {limit})")
     if autopilot == "px4":
-        v_true, n = fastest_true_second(session[run].get("truth", {"truth": []}), sitl.SPEEDUP["px4"])
+        assert "truth" in session[run], f"px4 {run}: SIH's ground truth was not observed"
+        v_true, n = fastest_true_second(session[run]["truth"], sitl.SPEEDUP["px4"])
         print(f"px4 {run}: ground truth, fastest 1 s {v_true:.3f} m/s over {n} airborne samples")
         assert n > 300 and v_true <= limit * 1.1
     else:

@@ -137,12 +137,15 @@ def _follow_raw(m, st: dict, seen: set, end: float, per_sysid: bool, home) -> No
                                  msg.vy / 100.0, msg.vx / 100.0])
 
 
-def observe_truth(conn: str, out: str, timeout_s: float) -> int:
+def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float, float] | None = None) -> int:
     """Follow a PX4 SIH on its ground-station link in raw pymavlink (system id 253) until it has been armed and is
     disarmed again (+1 s) or ``timeout_s`` wall seconds: SIH's ground truth (HIL_STATE_QUATERNION) and the
     estimate (GLOBAL_POSITION_INT), each asked at 20 Hz. Writes ``{"truth": [[wall_s, horizontal m/s, alt m AMSL],
     ...], "estimate": [[wall_s, horizontal m/s, relative_alt m], ...]}`` (wall: this observer's monotonic clock;
-    HIL_STATE_QUATERNION carries no time stamp on SIH)."""
+    HIL_STATE_QUATERNION carries no time stamp on SIH). ``stop`` (pid, delay_s, stop_s): also what
+    :func:`stop_when_flying` does, from this link (one process per UDP port), while observing on."""
+    import threading
+
     from pymavlink import mavutil
 
     m = mavutil.mavlink_connection(conn, source_system=253, source_component=190)
@@ -165,6 +168,9 @@ def observe_truth(conn: str, out: str, timeout_s: float) -> int:
                 continue
             sysid = msg.get_srcSystem()
             armed = bool(msg.base_mode & 128)
+            if stop and armed and mavutil.mode_string_v10(msg) in ("GUIDED", "OFFBOARD"):
+                threading.Thread(target=_stop_for, args=stop, daemon=True).start()
+                stop = None
             was = was or armed
             if was and not armed and disarmed_at is None:
                 disarmed_at = now
@@ -181,8 +187,6 @@ def stop_when_flying(conn: str, pid: int, delay_s: float, stop_s: float, timeout
     """On a second MAVLink link (``conn``: the firmware's other output), wait for a HEARTBEAT showing the vehicle
     armed in a guided mode (GUIDED / OFFBOARD), ``delay_s`` wall seconds more, then SIGSTOP firmware ``pid`` for
     ``stop_s`` seconds and SIGCONT it (a link loss the runtime must ride out)."""
-    import signal
-
     from pymavlink import mavutil
 
     m = mavutil.mavlink_connection(conn, source_system=254, source_component=191)
@@ -192,14 +196,21 @@ def stop_when_flying(conn: str, pid: int, delay_s: float, stop_s: float, timeout
         if hb is None or hb.autopilot == 8:
             continue
         if hb.base_mode & 128 and mavutil.mode_string_v10(hb) in ("GUIDED", "OFFBOARD"):
-            time.sleep(delay_s)
-            os.kill(pid, signal.SIGSTOP)
-            time.sleep(stop_s)
-            os.kill(pid, signal.SIGCONT)
-            print(f"stopped {pid} for {stop_s} s", flush=True)
+            _stop_for(pid, delay_s, stop_s)
             return 0
     print("never saw the vehicle flying", flush=True)
     return 1
+
+
+def _stop_for(pid: int, delay_s: float, stop_s: float) -> None:
+    """``delay_s`` seconds, then SIGSTOP ``pid`` for ``stop_s`` seconds and SIGCONT it."""
+    import signal
+
+    time.sleep(delay_s)
+    os.kill(pid, signal.SIGSTOP)
+    time.sleep(stop_s)
+    os.kill(pid, signal.SIGCONT)
+    print(f"stopped {pid} for {stop_s} s", flush=True)
 
 
 def freeze_our_drone_when_flying(conn: str, root_pid: int, out: str, delay_s: float, stop_s: float,
@@ -260,7 +271,8 @@ if __name__ == "__main__":
         sys.exit(observe_raw(sys.argv[2], sys.argv[3], float(sys.argv[4]),
                              {int(k): v for k, v in extra.items()} or None))
     if sys.argv[1] == "observe-truth":
-        sys.exit(observe_truth(sys.argv[2], sys.argv[3], float(sys.argv[4])))
+        stop = (int(sys.argv[5]), float(sys.argv[6]), float(sys.argv[7])) if len(sys.argv) > 5 else None
+        sys.exit(observe_truth(sys.argv[2], sys.argv[3], float(sys.argv[4]), stop))
     if sys.argv[1] == "freeze-our-drone":
         sys.exit(freeze_our_drone_when_flying(sys.argv[2], int(sys.argv[3]), sys.argv[4], float(sys.argv[5]),
                                               float(sys.argv[6])))
