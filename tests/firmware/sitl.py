@@ -467,10 +467,10 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
         slow = small_cameras(mavlink_env(autopilot, FARM_ENV))
         slow["robots"][0]["limits"]["max_speed"] = 0.5
         def observed(name: str, step: str, stop: str = "") -> str:  # with SIH's truth beside it (truth_<name>.json)
-            f = shlex.quote(str(workdir / f"truth_{name}.json"))  # the observer stops 1 s after the disarm: wait
+            f = shlex.quote(str(workdir / f"truth_{name}.json"))  # it stops 1 s after the disarm, or told after 30 s
             return (f"( {py} -m tests.firmware.sitl_watchers observe-truth {monitor_connection(autopilot)} {f} 300"
-                    f"{stop} > {shlex.quote(str(workdir / f'truth_{name}.log'))} 2>&1 & ) ; {step}; rc=$?; "
-                    f"for k in $(seq 1 60); do [ -e {f} ] && break; sleep 0.5; done; exit $rc")
+                    f"{stop} > {shlex.quote(str(workdir / f'truth_{name}.log'))} 2>&1 & ) ; {step}; rc=$?; for k in "
+                    f"$(seq 1 80); do [ -e {f} ] && break; [ $k = 60 ] && pkill -TERM -f {f}; sleep 0.5; done; exit $rc")
         scenarios["slow"] = [observed("slow", survey_step(autopilot, _write_env(workdir / "slow.json", slow),
                                                           workdir / "slow.mcap"))]
         for name in ("guided", "auto"):  # ... and the surveys at MAX_SPEED; the link loss's stop by the observer

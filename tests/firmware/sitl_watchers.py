@@ -143,7 +143,9 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
     estimate (GLOBAL_POSITION_INT), each asked at 20 Hz. Writes ``{"truth": [[wall_s, horizontal m/s, alt m AMSL],
     ...], "estimate": [[wall_s, horizontal m/s, relative_alt m], ...]}`` (wall: this observer's monotonic clock;
     HIL_STATE_QUATERNION carries no time stamp on SIH). ``stop`` (pid, delay_s, stop_s): also what
-    :func:`stop_when_flying` does, from this link (one process per UDP port), while observing on."""
+    :func:`stop_when_flying` does, from this link (one process per UDP port), while observing on. SIGTERM ends
+    the observation early, the file written all the same."""
+    import signal
     import threading
 
     from pymavlink import mavutil
@@ -152,7 +154,9 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
     end = time.monotonic() + timeout_s
     truth, est = [], []
     sysid, was, disarmed_at, next_req = None, False, None, 0.0
-    while time.monotonic() < end and not (disarmed_at and time.monotonic() - disarmed_at > 1.0):
+    ended: list[int] = []
+    signal.signal(signal.SIGTERM, lambda signum, frame: ended.append(signum))
+    while time.monotonic() < end and not ended and not (disarmed_at and time.monotonic() - disarmed_at > 1.0):
         if time.monotonic() >= next_req:
             m.mav.heartbeat_send(6, 8, 0, 0, 4)
             for mid in (115, 33) if sysid else ():
@@ -166,8 +170,12 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
         if msg.get_type() == "HEARTBEAT":
             if msg.autopilot == 8 or msg.type == 6:
                 continue
+            if sysid is None:
+                print(f"{now:.1f}: vehicle {msg.get_srcSystem()} heard", flush=True)
             sysid = msg.get_srcSystem()
             armed = bool(msg.base_mode & 128)
+            if armed != was and disarmed_at is None:
+                print(f"{now:.1f}: {'armed' if armed else 'disarmed'}", flush=True)
             if stop and armed and mavutil.mode_string_v10(msg) in ("GUIDED", "OFFBOARD"):
                 threading.Thread(target=_stop_for, args=stop, daemon=True).start()
                 stop = None
@@ -178,6 +186,9 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
             truth.append([now, math.hypot(msg.vx, msg.vy) / 100.0, msg.alt / 1000.0])
         else:
             est.append([now, math.hypot(msg.vx, msg.vy) / 100.0, msg.relative_alt / 1000.0])
+    why = "disarmed" if disarmed_at else "told to stop" if ended else "timed out"
+    print(f"{time.monotonic():.1f}: done ({why}), {len(truth)} truth and "
+          f"{len(est)} estimate samples", flush=True)
     Path(out + ".part").write_text(json.dumps({"truth": truth, "estimate": est}))
     os.replace(out + ".part", out)  # whole or absent: the scenario waits for the file, then kills what is left
     return 0
