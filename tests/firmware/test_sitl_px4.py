@@ -78,7 +78,8 @@ def test_a_px4_rebooted_with_its_last_mission_flies_the_new_one(session):
     """The farm survey as an autopilot mission on the PX4 that flew it before, rebooted with its storage: the
     firmware reports the stored mission's last item after the new upload, which is no progress of the new one.
     Every corner reached and held (from the firmware's positions), the drone's own mission reports from the first
-    item on, and the survey's waypoints reported reached where the vehicle was within the hold radius."""
+    item on, and the survey's waypoints reported reached where the vehicle was within 2 m of them (PX4's default
+    acceptance radius, NAV_ACC_RAD)."""
     run = session["auto_again"]
     _survey_done(run, "auto_again", "px4")
     ev = events(run["rec"])
@@ -87,4 +88,3 @@ def test_a_px4_rebooted_with_its_last_mission_flies_the_new_one(session):
     reached = [e for e in ev if e["event"] == "waypoint_reached"]
     # within PX4's own default acceptance radius (NAV_ACC_RAD 2 m); the stored mission's report made them 10-14 m
     assert len(reached) == 4 and all(e["error_m"] <= 2.0 for e in reached), reached
-
