@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from aerodaas.clusters import reaper
+from aerodaas.clusters.node_logs import default_temp_dir, failed_start_report
 from aerodaas.clusters.state_folder import state_dir
 
 __all__ = ["attached_address", "await_fresh_workers", "down", "importable_by_cluster", "not_on_cluster_path",
@@ -175,17 +176,24 @@ def _start_head(cluster_type: Any, head_args: dict[str, Any]) -> Any:
     (at most :data:`HEAD_START_ATTEMPTS` times) when Ray reports "timed out during startup": Ray gives a raylet a
     fixed 30 s to register with the GCS (``ray/_private/node.py``), which a loaded machine can miss. A failed
     attempt's processes (this daemon's descendants started by it: GCS, raylet, dashboard) are killed first, since
-    the node object that would stop them was never made. Any other error, or the last timeout, is raised."""
+    the node object that would stop them was never made; each timed-out attempt first prints whether its raylet and
+    GCS still ran and their logs' last lines (:mod:`aerodaas.clusters.node_logs`). Any other error, or the last
+    timeout, is raised."""
     for attempt in range(HEAD_START_ATTEMPTS):
         before = set(reaper.descendants(os.getpid()))
+        since_s = time.time()
         try:
             return cluster_type(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
         except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
-            if "timed out during startup" not in str(e) or attempt == HEAD_START_ATTEMPTS - 1:
+            if "timed out during startup" not in str(e):
+                raise
+            started = [p for p in reaper.descendants(os.getpid()) if p not in before]
+            print(f"aerodaas up: Ray's node start timed out (attempt {attempt + 1} of {HEAD_START_ATTEMPTS})\n"
+                  + failed_start_report(default_temp_dir(), os.getpid(), since_s, started),
+                  file=sys.stderr, flush=True)
+            if attempt == HEAD_START_ATTEMPTS - 1:
                 raise
             reaper.kill_started_since(before)
-            print(f"aerodaas up: Ray's node start timed out (attempt {attempt + 1} of {HEAD_START_ATTEMPTS}); "
-                  "starting it again", file=sys.stderr, flush=True)
     raise AssertionError("unreachable")  # the loop returns or raises
 
 

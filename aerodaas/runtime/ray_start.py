@@ -13,10 +13,12 @@ import os
 import sys
 import tempfile
 import threading
+import time
 
 from aerodaas.clusters import reaper
 from aerodaas.clusters.addresses import check_ray_address
 from aerodaas.clusters.lean_head import without_monitor_and_api_server
+from aerodaas.clusters.node_logs import failed_start_report
 from aerodaas.clusters.local import enable_token_auth
 from aerodaas.clusters.loopback import loopback_only
 from aerodaas.clusters.persistent import attached_address, await_fresh_workers, not_on_cluster_path
@@ -111,7 +113,9 @@ def _attach_up(up_address: str, renv: dict) -> None:
 
 def _start_local(dashboard: bool) -> None:
     """A fresh loopback-only local Ray of our own (never one that `ray start` left on this machine), retried up to
-    3 times when Ray's startup times out on a loaded machine, and once without the dashboard when that fails.
+    3 times when Ray's startup times out on a loaded machine (each timed-out attempt prints whether its raylet and
+    GCS still ran and their logs' last lines: :mod:`aerodaas.clusters.node_logs`), and once without the dashboard
+    when that fails.
     Without ``dashboard`` its head starts neither the autoscaler monitor nor the dashboard's API server
     (:mod:`aerodaas.clusters.lean_head`).
 
@@ -128,6 +132,7 @@ def _start_local(dashboard: bool) -> None:
     for attempt in range(3):
         restore = loopback_only()
         before = set(reaper.descendants(os.getpid()))
+        since_s = time.time()
         try:
             # the dashboard (loopback only) serves `ray list actors` and the actor view of the run
             # worker_niceness 0: drone actors fly the vehicles; Ray's default niceness 15 would let any other
@@ -145,6 +150,11 @@ def _start_local(dashboard: bool) -> None:
             # Ray gives its raylet a fixed 30 s to register with the GCS (ray/_private/node.py); a heavily loaded
             # machine can miss that: start again (at most 3 times) rather than fail the run. A dashboard that fails
             # to start is not worth failing the run for: start again without it
+            timed_out = "timed out during startup" in str(e)
+            if timed_out:  # whether the raylet died or was slow, from what the attempt left (before it is killed)
+                started = [p for p in reaper.descendants(os.getpid()) if p not in before]
+                print(f"aerodaas: warning: Ray's node start timed out (attempt {attempt + 1} of 3)\n"
+                      + failed_start_report(temp_dir, os.getpid(), since_s, started), file=sys.stderr, flush=True)
             ray.shutdown()
             # the failed attempt's GCS, raylet, dashboard: ray.shutdown() does not stop a node that never started
             reaper.kill_started_since(before, temp_dir)
@@ -153,7 +163,7 @@ def _start_local(dashboard: bool) -> None:
                       f"running without it", file=sys.stderr, flush=True)
                 dashboard = False
                 continue
-            if "timed out during startup" not in str(e) or attempt == 2:
+            if not timed_out or attempt == 2:
                 raise
     PROCESS.ray.local = True
 
