@@ -326,8 +326,8 @@ class EnvironmentConfig(_Cfg):
                                      "MAVLink backend (a robot's own mavlink section overrides them)")
     drones_per_actor: int = Field(default=1, ge=1, le=256, description="drones sharing one drone actor (one process); "
                                   "1: an actor per drone; more for memory-bound fleets")
-    actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics "
-                                    "and dispatcher actor of a run (the recorder is never restarted)")
+    actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics, "
+                                    "dispatcher and per-node recorder actor (the run's recorder: 3, new segments)")
     actor_opencv_threads: int | None = Field(
         default=1, ge=1, le=256, description="OpenCV's worker threads (cv2.setNumThreads) in each drone and analytics "
         "actor of a run: 1 renders each frame on the thread that asks for it, no pool thread per actor competing for "
