@@ -30,7 +30,12 @@ def _named(tmp_path, name: str) -> subprocess.Popen:
     """A process whose /proc/<pid>/comm is ``name`` (its executable's file name), as Ray's raylet and GCS are."""
     exe = tmp_path / name
     shutil.copy(shutil.which("sleep"), exe)
-    return subprocess.Popen([str(exe), "120"])
+    proc = subprocess.Popen([str(exe), "120"])
+    for _ in range(600):  # until it has exec'd (a forked child still carries its parent's name)
+        if open(f"/proc/{proc.pid}/comm").read().strip() == name:
+            return proc
+        time.sleep(0.1)
+    raise AssertionError(f"{name} never exec'd")
 
 
 def test_the_report_reads_this_attempts_session_and_says_which_process_ran(tmp_path):
