@@ -87,6 +87,8 @@ def test_a_drivers_timed_out_start_prints_the_report_with_each_attempt(tmp_path,
         raise Exception("The current node timed out during startup. This could happen because ...")
 
     monkeypatch.setattr(ray, "init", timed_out_init)
+    # the real one would disconnect this pytest worker from its shared Ray session (other tests' runs)
+    monkeypatch.setattr(ray, "shutdown", lambda: None)
     monkeypatch.setattr(ray_start, "ray_temp_dir", lambda: str(temp))
     monkeypatch.setattr(ray_start, "limit_malloc_arenas", lambda: False)
     monkeypatch.setattr(ray_start, "lean_worker_imports", lambda: False)
