@@ -7,6 +7,13 @@ death, then try to report it to the dead GCS and wait out its client's timeout: 
 dashboard and runtime-env agents of a SIGKILLed driver stayed 60-64 s (``ray/_private/process_watcher.py``,
 ``report_raylet_error_logs``).
 
+The same holds for the POSIX shared-memory segments of the same-node channels (``/dev/shm/adc<pid>_<hex>``, named
+by :func:`segment_prefix`): a segment is the sender's to unlink, and one whose process died without doing so is
+removed by :func:`sweep_segments` — by the reaper once the run's processes are gone, and by any process of ours
+that creates a segment (``aerodaas.actors.data.channel_slots``), on any node. No resource-tracker process per actor
+is started for them (CPython's ``multiprocessing.shared_memory`` starts one, a Python interpreter of about 11 MB
+PSS, in each process that creates or maps a segment before Python 3.13).
+
 The reaper is a separate process started with the local Ray (:func:`start`), in its own session so that a
 Ctrl-C to the driver's process group does not reach it. It runs this file as a script (standard library only,
 ~10 MB). Every ``period_s`` it records the driver's descendants as (pid, start time) pairs; once the driver is
@@ -18,12 +25,47 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
 
-__all__ = ["descendants", "ensure_started", "kill_started_since", "running_for", "start", "start_time"]
+__all__ = ["SHM_DIR", "descendants", "ensure_started", "kill_started_since", "running_for", "segment_prefix", "start",
+           "start_time", "sweep_segments"]
+
+#: where ``shm_open(3)`` keeps POSIX shared-memory segments on Linux (glibc: ``/dev/shm/<name>``)
+SHM_DIR = "/dev/shm"
+_SEGMENT = re.compile(r"adc(\d+)_[0-9a-f]+")
+
+
+def segment_prefix(pid: int) -> str:
+    """The name prefix of the shared-memory segments process ``pid`` creates for its same-node channels: ``adc`` +
+    the pid + ``_`` (a segment's owner is known from its name alone)."""
+    return f"adc{pid}_"
+
+
+def sweep_segments(pids: set[int] | None = None, shm_dir: str = SHM_DIR) -> list[str]:
+    """Unlink the channel segments (:func:`segment_prefix`) in ``shm_dir`` of the processes in ``pids`` (default:
+    of every process that no longer runs, as ``/proc/<pid>`` of this pid namespace shows). A process that maps one
+    keeps its mapping (unlink(2) only removes the name). Returns the names unlinked; never raises."""
+    try:
+        names = os.listdir(shm_dir)
+    except OSError:
+        return []
+    gone = []
+    for name in names:
+        m = _SEGMENT.fullmatch(name)
+        if m is None:
+            continue
+        pid = int(m.group(1))
+        if (pid in pids) if pids is not None else not os.path.exists(f"/proc/{pid}"):
+            try:
+                os.unlink(os.path.join(shm_dir, name))
+                gone.append(name)
+            except OSError:
+                pass
+    return gone
 
 
 def _stat_fields(pid: int | str) -> list[str] | None:
@@ -175,6 +217,7 @@ def _watch(driver: int, period_s: float, grace_s: float) -> int:
                 os.kill(pid, signal.SIGKILL)
             except OSError:
                 pass
+    sweep_segments(set(seen) | {driver})  # what a killed (or crashed) actor of the run left in shared memory
     return 0
 
 

@@ -8,7 +8,7 @@ shared memory, a persistent channel). A channel does what dora-rs does, between 
 and restarts:
 
 * the frame's pixels are copied once into a **shared-memory slot** (POSIX shared memory,
-  :class:`multiprocessing.shared_memory.SharedMemory`) owned by the sending actor, which the receiver maps and reads
+  :class:`~aerodaas.actors.data.channel_slots.Segment`) owned by the sending actor, which the receiver maps and reads
   in place (a read-only (H, W, 3) uint8 BGR ``ndarray`` over the slot; no copy on the receiving side);
 * the message itself (a :class:`~aerodaas.protocol.messages.Delivery`, small) travels on a **persistent, authenticated Unix
   socket** (:mod:`multiprocessing.connection`: HMAC challenge with the run's key both ways), and the outputs bound
@@ -46,7 +46,6 @@ import threading
 import time
 import weakref
 from multiprocessing import connection as mpc
-from multiprocessing.shared_memory import SharedMemory
 from typing import Any, Callable
 
 import numpy as np
@@ -54,7 +53,7 @@ import numpy as np
 from aerodaas.actors.data.channel_conn import BufferedConnection
 from aerodaas.actors.data.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
 from aerodaas.actors.data.channel_outlet import shutdown_connection
-from aerodaas.actors.data.channel_slots import attach
+from aerodaas.actors.data.channel_slots import Segment, attach
 from aerodaas.actors.data.channel_wire import decode, encode_done, encode_free
 from aerodaas.protocol.messages import Delivery, FrameMsg
 
@@ -67,7 +66,7 @@ def channel_address(run_key: bytes, actor_id: str) -> str:
     return "\0aerodaas-" + hashlib.sha256(run_key + actor_id.encode()).hexdigest()[:32]
 
 
-def _freed(freed: deque, wake: threading.Event, name: str, server_thread: int, shm: SharedMemory) -> None:
+def _freed(freed: deque, wake: threading.Event, name: str, server_thread: int, shm: Segment) -> None:
     """A mapped frame was collected: its slot joins ``freed``; the late-frees thread is woken only off the connection's
     own thread (``server_thread``), whose next answer carries it (a thread switch per frame saved). ``shm``: the
     frame's mapping, held by this finalizer so that it outlives every frame read from it (unmapped when the last
@@ -86,7 +85,7 @@ class _SenderSession:
     def __init__(self, conn: Any) -> None:
         self.conn = conn
         self.send_lock = threading.Lock()
-        self.maps: dict[str, SharedMemory] = {}
+        self.maps: dict[str, Segment] = {}
         self.freed: deque[str] = deque()
         self.wake = threading.Event()
         self.stop = threading.Event()
@@ -262,7 +261,7 @@ class ChannelServer:
         return True
 
     @staticmethod
-    def _map(sf: SlotFrame, maps: dict[str, SharedMemory], freed: deque, wake: threading.Event,
+    def _map(sf: SlotFrame, maps: dict[str, Segment], freed: deque, wake: threading.Event,
              server_thread: int) -> np.ndarray:
         """The read-only array over slot ``sf`` (mapped once per slot); when the last reference to it goes, its
         name joins ``freed`` (never a send from a finalizer: it may run inside another send of this thread)."""

@@ -1,8 +1,17 @@
 """The shared-memory slots of the same-node channel (:mod:`aerodaas.actors.data.channel`): the segments a sender
 creates for its frames (:class:`Slot`, named by :func:`own_prefix`) and the receiver's mapping of one of them
-(:func:`attach`), which never makes the receiver the segment's owner."""
+(:func:`attach`), which never makes the receiver the segment's owner.
+
+A segment is a POSIX shared-memory object (``/dev/shm/<name>`` on Linux, what ``shm_open(3)`` makes) mapped with
+:mod:`mmap` (:class:`Segment`): unlike :class:`multiprocessing.shared_memory.SharedMemory` before Python 3.13, it
+starts no resource-tracker process in each actor that creates or maps one. The sender unlinks its segments when its
+outlet closes; those of a process that died first are unlinked by
+:func:`aerodaas.clusters.reaper.sweep_segments` (each new segment sweeps them, and so does a local run's reaper).
+Where there is no ``/dev/shm``, ``SharedMemory`` (and its tracker) is used instead.
+"""
 from __future__ import annotations
 
+import mmap
 import os
 import secrets
 import sys
@@ -10,28 +19,95 @@ from multiprocessing import resource_tracker
 from multiprocessing.shared_memory import SharedMemory
 from typing import Any
 
-__all__ = ["Slot", "attach", "create_segment", "own_prefix", "release_lent"]
+from aerodaas.clusters.reaper import SHM_DIR, segment_prefix, sweep_segments
+
+__all__ = ["Segment", "Slot", "attach", "create_segment", "own_prefix", "release_lent"]
 
 
 def own_prefix() -> str:
-    """The name prefix of the shared-memory segments this process creates (:func:`create_segment`): its pid, so a
-    segment of this very process is known by its name alone (no table of them kept)."""
-    return f"adc{os.getpid()}_"
+    """The name prefix of the shared-memory segments this process creates (:func:`create_segment`): its pid
+    (:func:`aerodaas.clusters.reaper.segment_prefix`), so a segment of this very process, and the owner of any
+    segment, is known by its name alone (no table of them kept)."""
+    return segment_prefix(os.getpid())
 
 
-def create_segment(size: int) -> SharedMemory:
+class Segment:
+    """A POSIX shared-memory segment ``name`` of ``size`` bytes in ``shm_dir``, mapped here: ``buf`` is a writable
+    :class:`memoryview` over the mapping. ``create``: a new segment (``FileExistsError`` when the name is taken),
+    readable and writable by this user only; else the existing one (``FileNotFoundError`` when there is none), its
+    size read from it. The same interface as :class:`multiprocessing.shared_memory.SharedMemory` (``name``,
+    ``size``, ``buf``, :meth:`close`, :meth:`unlink`), without its resource tracker."""
+
+    def __init__(self, name: str, create: bool = False, size: int = 0, shm_dir: str = SHM_DIR) -> None:
+        self.buf: memoryview | None = None
+        self._mmap: mmap.mmap | None = None
+        if create and size <= 0:
+            raise ValueError(f"a new shared-memory segment needs a positive size, not {size}")
+        self._path = os.path.join(shm_dir, name)
+        fd = os.open(self._path, os.O_RDWR | (os.O_CREAT | os.O_EXCL if create else 0), 0o600)
+        try:
+            if create:
+                os.ftruncate(fd, size)
+            else:
+                size = os.fstat(fd).st_size
+            self._mmap = mmap.mmap(fd, size)
+        except BaseException:
+            if create:
+                os.unlink(self._path)
+            raise
+        finally:
+            os.close(fd)
+        self.name, self.size = name, size
+        self.buf = memoryview(self._mmap)
+
+    def close(self) -> None:
+        """Unmap the segment here (``BufferError`` while an array still uses the mapping; then it stays mapped)."""
+        if self.buf is not None:
+            self.buf.release()
+            self.buf = None
+        if self._mmap is not None:
+            self._mmap.close()
+            self._mmap = None
+
+    def unlink(self) -> None:
+        """Remove the segment's name (``FileNotFoundError`` when it is gone); whoever maps it keeps the mapping."""
+        os.unlink(self._path)
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except (BufferError, OSError):
+            pass
+
+
+def _tracker_free() -> bool:
+    return os.path.isdir(SHM_DIR)
+
+
+def create_segment(size: int) -> Segment | SharedMemory:
     """A new segment of ``size`` bytes named :func:`own_prefix` + 12 random hex digits (23 characters at most: the
-    31 of macOS's ``PSHMNAMLEN``); a name in use is drawn again, as ``SharedMemory`` does with its own names."""
+    31 of macOS's ``PSHMNAMLEN``); a name in use is drawn again, as ``SharedMemory`` does with its own names. The
+    segments that processes no longer running left behind are unlinked first."""
+    if not _tracker_free():
+        while True:
+            try:
+                return SharedMemory(name=own_prefix() + secrets.token_hex(6), create=True, size=size)
+            except FileExistsError:
+                continue
+    sweep_segments()
     while True:
         try:
-            return SharedMemory(name=own_prefix() + secrets.token_hex(6), create=True, size=size)
+            return Segment(own_prefix() + secrets.token_hex(6), create=True, size=size)
         except FileExistsError:
             continue
 
 
-def attach(name: str) -> SharedMemory:
-    """Map the sender's segment ``name`` without making this process's resource tracker its owner (before Python
-    3.13 an attached segment is registered too, and would be unlinked when this process exits)."""
+def attach(name: str) -> Segment | SharedMemory:
+    """Map the sender's segment ``name`` without making this process its owner (``SharedMemory`` before Python
+    3.13, where there is no ``/dev/shm``, registers an attached segment too, which would be unlinked when this process
+    exits: undone here). ``FileNotFoundError`` when the segment is gone."""
+    if _tracker_free():
+        return Segment(name)
     if sys.version_info >= (3, 13):
         return SharedMemory(name=name, create=False, track=False)
     shm = SharedMemory(name=name, create=False)
