@@ -8,11 +8,11 @@ dashboard and runtime-env agents of a SIGKILLed driver stayed 60-64 s (``ray/_pr
 ``report_raylet_error_logs``).
 
 The same holds for the POSIX shared-memory segments of the same-node channels (``/dev/shm/adc<pid>_<hex>``, named
-by :func:`segment_prefix`): a segment is the sender's to unlink, and one whose process died without doing so is
-removed by :func:`sweep_segments` — by the reaper once the run's processes are gone, and by any process of ours
-that creates a segment (``aerodaas.actors.data.channel_slots``), on any node. No resource-tracker process per actor
-is started for them (CPython's ``multiprocessing.shared_memory`` starts one, a Python interpreter of about 11 MB
-PSS, in each process that creates or maps a segment before Python 3.13).
+by :func:`segment_prefix`): a segment is the sender's to unlink, and one that no process maps any more is removed
+by :func:`sweep_segments` — by the reaper once the run's processes are gone, and by any process of ours that
+creates a segment (``aerodaas.actors.data.channel_slots``), on any node. No resource-tracker process per actor is
+started for them (CPython's ``multiprocessing.shared_memory`` starts one, a Python interpreter of about 7 MiB PSS,
+in each process that creates or maps a segment before Python 3.13).
 
 The reaper is a separate process started with the local Ray (:func:`start`), in its own session so that a
 Ctrl-C to the driver's process group does not reach it. It runs this file as a script (standard library only,
@@ -24,6 +24,7 @@ touches a process that was not below the driver: a cluster of ``aerodaas up`` or
 from __future__ import annotations
 
 import argparse
+import fcntl
 import os
 import re
 import signal
@@ -31,40 +32,50 @@ import subprocess
 import sys
 import time
 
-__all__ = ["SHM_DIR", "descendants", "ensure_started", "kill_started_since", "running_for", "segment_prefix", "start",
-           "start_time", "sweep_segments"]
+__all__ = ["SEGMENT_NAME", "SHM_DIR", "descendants", "ensure_started", "kill_started_since", "running_for",
+           "segment_prefix", "start", "start_time", "sweep_segments"]
 
 #: where ``shm_open(3)`` keeps POSIX shared-memory segments on Linux (glibc: ``/dev/shm/<name>``)
 SHM_DIR = "/dev/shm"
-_SEGMENT = re.compile(r"adc(\d+)_[0-9a-f]+")
+#: the name of a same-node channel's segment: :func:`segment_prefix` + 12 hex digits
+SEGMENT_NAME = re.compile(r"adc(\d+)_[0-9a-f]{12}")
 
 
 def segment_prefix(pid: int) -> str:
     """The name prefix of the shared-memory segments process ``pid`` creates for its same-node channels: ``adc`` +
-    the pid + ``_`` (a segment's owner is known from its name alone)."""
+    the pid + ``_``."""
     return f"adc{pid}_"
 
 
 def sweep_segments(pids: set[int] | None = None, shm_dir: str = SHM_DIR) -> list[str]:
-    """Unlink the channel segments (:func:`segment_prefix`) in ``shm_dir`` of the processes in ``pids`` (default:
-    of every process that no longer runs, as ``/proc/<pid>`` of this pid namespace shows). A process that maps one
-    keeps its mapping (unlink(2) only removes the name). Returns the names unlinked; never raises."""
+    """Unlink the channel segments (:data:`SEGMENT_NAME`) in ``shm_dir`` that no process maps any more (of the
+    processes in ``pids`` by name, default: of any). Every process that creates or maps one holds a shared
+    ``flock(2)`` on it for as long as it maps it (``aerodaas.actors.data.channel_slots.Segment``), so an exclusive
+    lock taken without waiting means nobody does: a live process's segment is never unlinked, whatever its pid
+    namespace, and a reused pid changes nothing. Returns the names unlinked; never raises."""
     try:
         names = os.listdir(shm_dir)
     except OSError:
         return []
     gone = []
     for name in names:
-        m = _SEGMENT.fullmatch(name)
-        if m is None:
+        m = SEGMENT_NAME.fullmatch(name)
+        if m is None or (pids is not None and int(m.group(1)) not in pids):
             continue
-        pid = int(m.group(1))
-        if (pid in pids) if pids is not None else not os.path.exists(f"/proc/{pid}"):
-            try:
-                os.unlink(os.path.join(shm_dir, name))
+        path = os.path.join(shm_dir, name)
+        try:
+            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            if os.stat(path).st_ino == os.fstat(fd).st_ino:  # the name still names what was found unused
+                os.unlink(path)
                 gone.append(name)
-            except OSError:
-                pass
+        except OSError:  # mapped by a live process (the lock is held), or gone meanwhile
+            pass
+        finally:
+            os.close(fd)
     return gone
 
 
@@ -217,7 +228,7 @@ def _watch(driver: int, period_s: float, grace_s: float) -> int:
                 os.kill(pid, signal.SIGKILL)
             except OSError:
                 pass
-    sweep_segments(set(seen) | {driver})  # what a killed (or crashed) actor of the run left in shared memory
+    sweep_segments(set(seen) | {driver})  # what a killed (or crashed) actor of the run left and nobody maps
     return 0
 
 

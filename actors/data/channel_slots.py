@@ -4,13 +4,15 @@ creates for its frames (:class:`Slot`, named by :func:`own_prefix`) and the rece
 
 A segment is a POSIX shared-memory object (``/dev/shm/<name>`` on Linux, what ``shm_open(3)`` makes) mapped with
 :mod:`mmap` (:class:`Segment`): unlike :class:`multiprocessing.shared_memory.SharedMemory` before Python 3.13, it
-starts no resource-tracker process in each actor that creates or maps one. The sender unlinks its segments when its
-outlet closes; those of a process that died first are unlinked by
-:func:`aerodaas.clusters.reaper.sweep_segments` (each new segment sweeps them, and so does a local run's reaper).
-Where there is no ``/dev/shm``, ``SharedMemory`` (and its tracker) is used instead.
+starts no resource-tracker process in each actor that creates or maps one. Each process that maps a segment holds a
+shared ``flock(2)`` on it while it does. The sender unlinks its segments when its outlet closes; those that nobody
+maps any more (their sender died first) are unlinked by :func:`aerodaas.clusters.reaper.sweep_segments` (each new
+segment sweeps them, and so does a local run's reaper). Where there is no ``/dev/shm``, ``SharedMemory`` (and its
+tracker) is used instead.
 """
 from __future__ import annotations
 
+import fcntl
 import mmap
 import os
 import secrets
@@ -19,41 +21,55 @@ from multiprocessing import resource_tracker
 from multiprocessing.shared_memory import SharedMemory
 from typing import Any
 
-from aerodaas.clusters.reaper import SHM_DIR, segment_prefix, sweep_segments
+from aerodaas.clusters.reaper import SEGMENT_NAME, SHM_DIR, segment_prefix, sweep_segments
 
 __all__ = ["Segment", "Slot", "attach", "create_segment", "own_prefix", "release_lent"]
 
 
 def own_prefix() -> str:
     """The name prefix of the shared-memory segments this process creates (:func:`create_segment`): its pid
-    (:func:`aerodaas.clusters.reaper.segment_prefix`), so a segment of this very process, and the owner of any
-    segment, is known by its name alone (no table of them kept)."""
+    (:func:`aerodaas.clusters.reaper.segment_prefix`), so a segment of this very process is known by its name
+    alone (no table of them kept)."""
     return segment_prefix(os.getpid())
 
 
 class Segment:
-    """A POSIX shared-memory segment ``name`` of ``size`` bytes in ``shm_dir``, mapped here: ``buf`` is a writable
-    :class:`memoryview` over the mapping. ``create``: a new segment (``FileExistsError`` when the name is taken),
-    readable and writable by this user only; else the existing one (``FileNotFoundError`` when there is none), its
-    size read from it. The same interface as :class:`multiprocessing.shared_memory.SharedMemory` (``name``,
-    ``size``, ``buf``, :meth:`close`, :meth:`unlink`), without its resource tracker."""
+    """A same-node channel's shared-memory segment ``name`` (:data:`aerodaas.clusters.reaper.SEGMENT_NAME`) of
+    ``size`` bytes in ``shm_dir``, mapped here: ``buf`` is a writable :class:`memoryview` over the mapping, and this
+    process holds a shared ``flock(2)`` on the segment while it maps it (a sweep leaves it alone). ``create``: a new
+    segment, readable and writable by this user only. The interface of
+    :class:`multiprocessing.shared_memory.SharedMemory` (``name``, ``size``, ``buf``, :meth:`close`, :meth:`unlink`),
+    without its resource tracker.
+
+    Raises ValueError for a name that is not a channel segment's or a new segment's size under 1 byte,
+    FileExistsError when a new segment's name is taken, FileNotFoundError when an existing one is gone (or a new one
+    was swept before it was locked: draw another name), and ValueError for an existing segment of 0 bytes."""
 
     def __init__(self, name: str, create: bool = False, size: int = 0, shm_dir: str = SHM_DIR) -> None:
         self.buf: memoryview | None = None
         self._mmap: mmap.mmap | None = None
+        if SEGMENT_NAME.fullmatch(name) is None:
+            raise ValueError(f"not a channel segment's name: {name!r}")
         if create and size <= 0:
             raise ValueError(f"a new shared-memory segment needs a positive size, not {size}")
         self._path = os.path.join(shm_dir, name)
-        fd = os.open(self._path, os.O_RDWR | (os.O_CREAT | os.O_EXCL if create else 0), 0o600)
+        fd = os.open(self._path, os.O_RDWR | os.O_NOFOLLOW | (os.O_CREAT | os.O_EXCL if create else 0), 0o600)
         try:
+            fcntl.flock(fd, fcntl.LOCK_SH)  # held by the mapping (mmap keeps a duplicate of fd) until it is closed
             if create:
+                if os.stat(self._path).st_ino != os.fstat(fd).st_ino:  # swept between the open and the lock
+                    raise FileNotFoundError(f"shared-memory segment {name} was swept before it was locked")
                 os.ftruncate(fd, size)
             else:
                 size = os.fstat(fd).st_size
             self._mmap = mmap.mmap(fd, size)
         except BaseException:
             if create:
-                os.unlink(self._path)
+                try:
+                    if os.stat(self._path).st_ino == os.fstat(fd).st_ino:
+                        os.unlink(self._path)
+                except OSError:
+                    pass
             raise
         finally:
             os.close(fd)
@@ -61,7 +77,8 @@ class Segment:
         self.buf = memoryview(self._mmap)
 
     def close(self) -> None:
-        """Unmap the segment here (``BufferError`` while an array still uses the mapping; then it stays mapped)."""
+        """Unmap the segment here and release its lock. numpy holds no buffer export on ``buf``: an array made over
+        it must not be used after this (callers keep the segment until their last such array is collected)."""
         if self.buf is not None:
             self.buf.release()
             self.buf = None
@@ -70,7 +87,7 @@ class Segment:
             self._mmap = None
 
     def unlink(self) -> None:
-        """Remove the segment's name (``FileNotFoundError`` when it is gone); whoever maps it keeps the mapping."""
+        """Remove the segment's name (FileNotFoundError when it is gone); whoever maps it keeps the mapping."""
         os.unlink(self._path)
 
     def __del__(self) -> None:
@@ -80,15 +97,15 @@ class Segment:
             pass
 
 
-def _tracker_free() -> bool:
+def _has_dev_shm() -> bool:
     return os.path.isdir(SHM_DIR)
 
 
 def create_segment(size: int) -> Segment | SharedMemory:
     """A new segment of ``size`` bytes named :func:`own_prefix` + 12 random hex digits (23 characters at most: the
     31 of macOS's ``PSHMNAMLEN``); a name in use is drawn again, as ``SharedMemory`` does with its own names. The
-    segments that processes no longer running left behind are unlinked first."""
-    if not _tracker_free():
+    segments that nobody maps any more are unlinked first."""
+    if not _has_dev_shm():
         while True:
             try:
                 return SharedMemory(name=own_prefix() + secrets.token_hex(6), create=True, size=size)
@@ -98,15 +115,15 @@ def create_segment(size: int) -> Segment | SharedMemory:
     while True:
         try:
             return Segment(own_prefix() + secrets.token_hex(6), create=True, size=size)
-        except FileExistsError:
+        except (FileExistsError, FileNotFoundError):
             continue
 
 
 def attach(name: str) -> Segment | SharedMemory:
     """Map the sender's segment ``name`` without making this process its owner (``SharedMemory`` before Python
     3.13, where there is no ``/dev/shm``, registers an attached segment too, which would be unlinked when this process
-    exits: undone here). ``FileNotFoundError`` when the segment is gone."""
-    if _tracker_free():
+    exits: undone here). Raises what :class:`Segment` raises (FileNotFoundError when the segment is gone)."""
+    if _has_dev_shm():
         return Segment(name)
     if sys.version_info >= (3, 13):
         return SharedMemory(name=name, create=False, track=False)

@@ -1,7 +1,8 @@
 """The same-node channel's shared-memory segments (aerodaas.actors.data.channel_slots): a sender and a receiver start
 no resource-tracker process (CPython's ``SharedMemory`` starts one per process before 3.13), the bytes one writes are
-the bytes the other maps, and a segment whose process died is unlinked by the next segment made on the machine and by
-a local run's reaper, never one of a process that still runs. Real processes, /dev/shm as it is."""
+the bytes the other maps, and a segment nobody maps any more is unlinked by the next segment made on the machine and
+by a local run's reaper, never one that a live process maps (whatever its pid says). Real processes, /dev/shm as it
+is; other pytest workers sweep concurrently, so each check is made while the process it is about still runs."""
 from __future__ import annotations
 
 import os
@@ -21,24 +22,32 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _python(code: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, stdout=subprocess.PIPE,
-                            text=True)
+    """A fresh interpreter running ``code``; it reads a line from stdin wherever ``code`` waits for the test."""
+    return subprocess.Popen([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
 
 
 def _exists(name: str) -> bool:
     return os.path.exists(os.path.join(SHM_DIR, name))
 
 
+def _end(*procs: subprocess.Popen) -> None:
+    for p in procs:
+        p.kill()
+        p.wait(timeout=60)
+    sweep_segments({p.pid for p in procs})
+
+
 def test_a_sender_and_a_receiver_share_the_bytes_and_start_no_resource_tracker():
     """The sender's slot and a receiver's mapping in two fresh interpreters: the receiver reads what the sender
     wrote, and neither process has a child (a resource tracker would be one)."""
     sender = _python("""
-        import time
+        import sys
         from aerodaas.actors.data.channel_slots import Slot
         s = Slot(640 * 480 * 3)
         s.shm.buf[:5] = b"frame"
         print(s.shm.name, flush=True)
-        time.sleep(300)
+        sys.stdin.readline()
         """)
     try:
         name = sender.stdout.readline().strip()
@@ -51,66 +60,69 @@ def test_a_sender_and_a_receiver_share_the_bytes_and_start_no_resource_tracker()
             """)], cwd=ROOT, capture_output=True, text=True, timeout=120, check=True)
         assert receiver.stdout.split() == ["frame", str(640 * 480 * 3), "0"]
         assert psutil.Process(sender.pid).children(recursive=True) == []
-        assert _exists(name)
     finally:
-        sender.kill()
-        sender.wait(timeout=60)
-    sweep_segments({sender.pid})
+        _end(sender)
 
 
-def test_a_dead_processs_segments_are_swept_by_the_next_segment_and_a_live_ones_kept():
+def test_a_segment_nobody_maps_is_swept_and_a_mapped_one_kept_whatever_its_pid():
+    """A process that left its segment without unlinking it (as a SIGKILLed actor does) stays alive but unmapped
+    it: the next segment made sweeps it. A live process's mapped segment is kept even when the sweep is told its
+    pid (a reused pid looks the same) — until it is unmapped."""
     code = """
-        import os, time
+        import sys
         from aerodaas.actors.data.channel_slots import create_segment
         s = create_segment(4096)
         print(s.name, flush=True)
-        {end}
+        sys.stdin.readline()
+        {then}
+        print("done", flush=True)
+        sys.stdin.readline()
         """
-    dead = _python(code.format(end="os._exit(0)  # without unlinking: as a SIGKILLed actor"))
-    live = _python(code.format(end="time.sleep(300)"))
+    left = _python(code.format(then="s.close()  # unmapped, never unlinked"))
+    held = _python(code.format(then="pass"))
     try:
-        dead_name, live_name = dead.stdout.readline().strip(), live.stdout.readline().strip()
-        assert dead.wait(timeout=60) == 0 and _exists(dead_name) and _exists(live_name)
-        mine = create_segment(64)  # sweeps first
+        left_name, held_name = left.stdout.readline().strip(), held.stdout.readline().strip()
+        assert _exists(left_name) and _exists(held_name)
+        assert sweep_segments({left.pid, held.pid}) == []  # both mapped
+        left.stdin.write("\n")
+        left.stdin.flush()
+        assert left.stdout.readline().strip() == "done"
+        mine = create_segment(64)  # sweeps first (or another worker's sweep already did)
         try:
-            assert not _exists(dead_name) and _exists(live_name)
+            assert not _exists(left_name) and _exists(held_name) and _exists(mine.name)
         finally:
             mine.close()
             mine.unlink()
+        assert held_name not in sweep_segments({held.pid}) and _exists(held_name)
     finally:
-        live.kill()
-        live.wait(timeout=60)
-    assert sweep_segments({live.pid}) == [live_name] and not _exists(live_name)
+        _end(left, held)
+    sweep_segments({held.pid})
+    assert not _exists(held_name)
 
 
-def test_the_reaper_unlinks_what_a_dead_drivers_actors_left(tmp_path):
-    """A 'driver' starts its reaper and an 'actor' in a session of its own that makes a segment, then dies: once the
-    reaper has killed the actor, the segment is gone too."""
-    pidfile = tmp_path / "actor.txt"
-    driver = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
-        import subprocess, sys, time
+def test_the_reaper_unlinks_what_a_dead_driver_left():
+    """A 'driver' starts its reaper, makes a segment and dies without unlinking it (SIGKILL, the OOM killer): the
+    reaper, which sweeps the segments of the driver and of every process it saw below it once they are gone, unlinks
+    it. (That the reaper sees and ends the driver's descendants: tests/cluster/test_reaper.py.)"""
+    driver = _python("""
+        import os
         from aerodaas.clusters import reaper
+        from aerodaas.actors.data.channel_slots import create_segment
         reaper.start(period_s=0.1, grace_s=0.5)
-        actor = subprocess.Popen([sys.executable, "-c", "import time\\n"
-                                  "from aerodaas.actors.data.channel_slots import create_segment\\n"
-                                  "s = create_segment(4096)\\n"
-                                  "open({str(pidfile)!r}, 'w').write(s.name)\\n"
-                                  "time.sleep(300)"], start_new_session=True)
-        while True:
-            try:
-                if open({str(pidfile)!r}).read():
-                    break
-            except OSError:
-                pass
+        s = create_segment(4096)
+        print(s.name, flush=True)
+        os._exit(0)
+        """)
+    name = driver.stdout.readline().strip()
+    try:
+        assert driver.wait(timeout=120) == 0 and name
+        for _ in range(600):  # up to 60 s for the reaper to notice, wait its grace and sweep: a bound, not a timing
+            if not _exists(name):
+                break
             time.sleep(0.1)
-        time.sleep(0.5)  # the reaper has seen the actor
-        """)], cwd=ROOT)
-    assert driver.wait(timeout=120) == 0
-    name = pidfile.read_text()
-    end = time.monotonic() + 60
-    while _exists(name) and time.monotonic() < end:  # a bound on waiting, not a timing assertion
-        time.sleep(0.2)
-    assert not _exists(name), "the dead driver's actor left its segment"
+        assert not _exists(name), "the dead driver's segment is still there"
+    finally:
+        _end(driver)
 
 
 def test_a_segment_is_created_once_per_name_and_attached_only_while_it_exists():
@@ -119,7 +131,9 @@ def test_a_segment_is_created_once_per_name_and_attached_only_while_it_exists():
         with pytest.raises(FileExistsError):
             Segment(s.name, create=True, size=128)
         with pytest.raises(ValueError, match="positive size"):
-            Segment(s.name + "x", create=True, size=0)
+            Segment(s.name[:-1] + "0", create=True, size=0)
+        with pytest.raises(ValueError, match="not a channel segment's name"):
+            attach("../" + s.name)
         m = attach(s.name)
         m.buf[:3] = b"abc"
         assert bytes(s.buf[:3]) == b"abc" and m.size == 128
