@@ -205,7 +205,8 @@ def _cmdline(pid: int, wait_s: float = 1.0) -> list[bytes]:
 
 def _watch(driver: int, period_s: float, grace_s: float) -> int:
     born = start_time(driver)
-    if born is None:
+    if born is None:  # gone before this reaper looked: what it made and nobody maps is all there is to reap
+        sweep_segments({driver})
         return 0
     me = os.getpid()
     seen: dict[int, int] = {}

@@ -108,8 +108,14 @@ def test_the_reaper_unlinks_what_a_dead_driver_left():
         import os
         from aerodaas.clusters import reaper
         from aerodaas.actors.data.channel_slots import create_segment
+        import time
         reaper.start(period_s=0.1, grace_s=0.5)
         s = create_segment(4096)
+        for _ in range(600):  # the reaper runs (whether it has looked at this process yet or not, it sweeps)
+            if reaper.running_for(os.getpid()):
+                break
+            time.sleep(0.1)
+        time.sleep(1.0)
         print(s.name, flush=True)
         os._exit(0)
         """)
