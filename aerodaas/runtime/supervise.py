@@ -37,7 +37,8 @@ def start_actors(plan: Any, placement: Any, max_restarts: int, classes: ActorCla
     """Create every actor of ``plan`` from ``classes`` (the run's actor classes, handed by its entry point): the
     run's recorder first, on the driver's node (restarted as its class says, into a new segment file); the others
     (a node's recorder too) named, placed with their ``label_selector`` (and their ``num_gpus``,
-    :meth:`~aerodaas.runtime.dataflow.ActorPlan.ray_options`) and restartable ``max_restarts`` times. Returns host id -> actor handle. Nothing is set up yet. Raises what Ray
+    :meth:`~aerodaas.runtime.dataflow.ActorPlan.ray_options`) and restartable ``max_restarts`` times. Returns host
+    id -> actor handle. Nothing is set up yet. Raises what Ray
     raises for an impossible placement option."""
     import ray  # lazy: heavy ray
 
