@@ -187,9 +187,8 @@ def _start_head(cluster_type: Any, head_args: dict[str, Any]) -> Any:
         except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
             if "timed out during startup" not in str(e):
                 raise
-            started = [p for p in reaper.descendants(os.getpid()) if p not in before]
             print(f"aerodaas up: Ray's node start timed out (attempt {attempt + 1} of {HEAD_START_ATTEMPTS})\n"
-                  + failed_start_report(default_temp_dir(), os.getpid(), since_s, started),
+                  + failed_start_report(default_temp_dir(), os.getpid(), since_s, reaper.started_since(before)),
                   file=sys.stderr, flush=True)
             if attempt == HEAD_START_ATTEMPTS - 1:
                 raise

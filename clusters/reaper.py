@@ -33,7 +33,7 @@ import sys
 import time
 
 __all__ = ["SEGMENT_NAME", "SHM_DIR", "descendants", "ensure_started", "kill_started_since", "running_for",
-           "segment_prefix", "start", "start_time", "sweep_segments"]
+           "segment_prefix", "start", "start_time", "started_since", "sweep_segments"]
 
 #: where ``shm_open(3)`` keeps POSIX shared-memory segments on Linux (glibc: ``/dev/shm/<name>``)
 SHM_DIR = "/dev/shm"
@@ -119,14 +119,20 @@ def descendants(root: int) -> list[int]:
 
 
 
+def started_since(before: set[int]) -> list[int]:
+    """This process's descendants that are not in ``before`` (pids from :func:`descendants` taken earlier): what
+    was started meanwhile, e.g. by a Ray node start."""
+    return [pid for pid in descendants(os.getpid()) if pid not in before]
+
+
 def kill_started_since(before: set[int], marker: str = "") -> list[int]:
     """SIGKILL this process's descendants that are not in ``before`` (pids from :func:`descendants` taken earlier)
     and whose command line contains ``marker`` ("" matches all): what a failed Ray node start left behind (GCS,
     raylet, dashboard), which ``ray.shutdown()`` does not stop when the node never finished starting. Returns the
     pids signalled; a process already gone is skipped."""
     killed = []
-    for pid in descendants(os.getpid()):
-        if pid in before or marker.encode() not in b" ".join(_cmdline(pid)):
+    for pid in started_since(before):
+        if marker.encode() not in b" ".join(_cmdline(pid)):
             continue
         try:
             os.kill(pid, signal.SIGKILL)

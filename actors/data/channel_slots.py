@@ -104,18 +104,17 @@ def _has_dev_shm() -> bool:
 def create_segment(size: int) -> Segment | SharedMemory:
     """A new segment of ``size`` bytes named :func:`own_prefix` + 12 random hex digits (23 characters at most: the
     31 of macOS's ``PSHMNAMLEN``); a name in use is drawn again, as ``SharedMemory`` does with its own names. The
-    segments that nobody maps any more are unlinked first."""
-    if not _has_dev_shm():
-        while True:
-            try:
-                return SharedMemory(name=own_prefix() + secrets.token_hex(6), create=True, size=size)
-            except FileExistsError:
-                continue
-    sweep_segments()
+    segments that nobody maps any more are unlinked first. Raises OSError when the segment cannot be made (``/dev/shm``
+    full)."""
+    tracker_free = _has_dev_shm()
+    if tracker_free:
+        sweep_segments()
     while True:
+        name = own_prefix() + secrets.token_hex(6)
         try:
-            return Segment(own_prefix() + secrets.token_hex(6), create=True, size=size)
-        except (FileExistsError, FileNotFoundError):
+            return Segment(name, create=True, size=size) if tracker_free else \
+                SharedMemory(name=name, create=True, size=size)
+        except (FileExistsError, FileNotFoundError):  # taken, or swept before it was locked: draw another
             continue
 
 

@@ -152,9 +152,9 @@ def _start_local(dashboard: bool) -> None:
             # to start is not worth failing the run for: start again without it
             timed_out = "timed out during startup" in str(e)
             if timed_out:  # whether the raylet died or was slow, from what the attempt left (before it is killed)
-                started = [p for p in reaper.descendants(os.getpid()) if p not in before]
                 print(f"aerodaas: warning: Ray's node start timed out (attempt {attempt + 1} of 3)\n"
-                      + failed_start_report(temp_dir, os.getpid(), since_s, started), file=sys.stderr, flush=True)
+                      + failed_start_report(temp_dir, os.getpid(), since_s, reaper.started_since(before)),
+                      file=sys.stderr, flush=True)
             ray.shutdown()
             # the failed attempt's GCS, raylet, dashboard: ray.shutdown() does not stop a node that never started
             reaper.kill_started_since(before, temp_dir)

@@ -8,6 +8,7 @@ import os
 import shutil
 import subprocess
 import time
+from pathlib import Path
 
 import pytest
 
@@ -32,7 +33,7 @@ def _named(tmp_path, name: str) -> subprocess.Popen:
     shutil.copy(shutil.which("sleep"), exe)
     proc = subprocess.Popen([str(exe), "120"])
     for _ in range(600):  # until it has exec'd (a forked child still carries its parent's name)
-        if open(f"/proc/{proc.pid}/comm").read().strip() == name:
+        if Path(f"/proc/{proc.pid}/comm").read_text().strip() == name:
             return proc
         time.sleep(0.1)
     raise AssertionError(f"{name} never exec'd")
