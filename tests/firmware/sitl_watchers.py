@@ -141,7 +141,8 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
     """Follow a PX4 SIH on its ground-station link in raw pymavlink (system id 253) until it has been armed and is
     disarmed again (+1 s) or ``timeout_s`` wall seconds: SIH's ground truth (HIL_STATE_QUATERNION) and the
     estimate (GLOBAL_POSITION_INT), each asked at 20 Hz. Writes ``{"truth": [[wall_s, horizontal m/s, alt m AMSL],
-    ...], "estimate": [[wall_s, horizontal m/s, relative_alt m], ...]}`` (wall: this observer's monotonic clock;
+    ...], "estimate": [[wall_s, horizontal m/s, relative_alt m], ...], "armed_s": wall_s or None, "disarmed_s": wall_s
+    or None}`` (wall: this observer's monotonic clock; the first HEARTBEAT armed, the first disarmed after it;
     HIL_STATE_QUATERNION carries no time stamp on SIH). ``stop`` (pid, delay_s, stop_s): also what
     :func:`stop_when_flying` does, from this link (one process per UDP port), while observing on. SIGTERM ends
     the observation early, the file written all the same."""
@@ -153,7 +154,7 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
     m = mavutil.mavlink_connection(conn, source_system=253, source_component=190)
     end = time.monotonic() + timeout_s
     truth, est = [], []
-    sysid, was, disarmed_at, next_req = None, False, None, 0.0
+    sysid, was, armed_at, disarmed_at, next_req = None, False, None, None, 0.0
     ended: list[int] = []
     signal.signal(signal.SIGTERM, lambda signum, frame: ended.append(signum))
     while time.monotonic() < end and not ended and not (disarmed_at and time.monotonic() - disarmed_at > 1.0):
@@ -179,6 +180,8 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
             if stop and armed and mavutil.mode_string_v10(msg) in ("GUIDED", "OFFBOARD"):
                 threading.Thread(target=_stop_for, args=stop, daemon=True).start()
                 stop = None
+            if armed and armed_at is None:
+                armed_at = now
             was = was or armed
             if was and not armed and disarmed_at is None:
                 disarmed_at = now
@@ -189,7 +192,8 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
     why = "disarmed" if disarmed_at else "told to stop" if ended else "timed out"
     print(f"{time.monotonic():.1f}: done ({why}), {len(truth)} truth and "
           f"{len(est)} estimate samples", flush=True)
-    Path(out + ".part").write_text(json.dumps({"truth": truth, "estimate": est}))
+    Path(out + ".part").write_text(json.dumps({"truth": truth, "estimate": est, "armed_s": armed_at,
+                                               "disarmed_s": disarmed_at}))
     os.replace(out + ".part", out)  # whole or absent: the scenario waits for the file, then kills what is left
     return 0
 
