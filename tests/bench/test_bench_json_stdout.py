@@ -46,7 +46,7 @@ TINY: dict[str, list] = {
                              id="startup", marks=slow)],
     "tello-video": [pytest.param(["--width", "160", "--height", "120", "--fps", "10", "--seconds", "1"],
                                  id="tello-video")],
-    "raypath": [pytest.param(["--repeat", "1"], id="raypath")],
+    "raypath": [pytest.param(["--repeat", "5"], id="raypath")],
     "detect": [pytest.param(["--images", "{images}", "--annotations", "{annotations}", "--limit", "1", "--repeat",
                              "1"], id="detect", marks=needs_data_case)],
     "tracks": [pytest.param(["{recording}"], id="tracks")],
@@ -54,6 +54,21 @@ TINY: dict[str, list] = {
     "recorder": [pytest.param(["--drones", "2", "--duration", "1", "--width", "160", "--height", "120", "--recorders",
                                "2"], id="recorder", marks=slow)],
 }
+
+
+def _raypath_steps(rep: dict) -> None:
+    """``bench raypath``: every step of a 720p frame's hop, each measured ``--repeat`` (5) times."""
+    assert rep["benchmark"] == "raypath" and rep["frame_bytes"] == 1280 * 720 * 3 and rep["machine"]["ray"]
+    steps = rep["results_us"]
+    assert set(steps) == {"put_frame", "call_ref_roundtrip", "call_ref_submit_to_start", "call_ref_start_to_get",
+                          "put_plus_call_ref", "actor_get_zero_copy", "get_small_ready", "call_empty_roundtrip",
+                          "call_small_inline_roundtrip", "call_frame_by_value_roundtrip"}
+    for s in steps.values():
+        assert s["n"] == 5 and 0 <= s["median"] <= s["p99"]
+
+
+#: what a benchmark's report holds beyond the machine, checked on its tiny run (one Ray start serves both)
+REPORT_CHECKS = {"raypath": _raypath_steps}
 
 
 def _bench_names() -> list[str]:
@@ -107,6 +122,7 @@ def test_bench_json_is_the_whole_stdout_and_the_working_folder_stays_empty(name,
     except ValueError:
         pytest.fail(f"stdout of `aerodaas bench {name} --json` is not one JSON document:\n{p.stdout[:3000]}")
     assert isinstance(report, dict) and report["machine"]["cpu_count"] >= 1  # the benchmark's report, not a stray
+    REPORT_CHECKS.get(name, lambda rep: None)(report)
     assert sorted(os.listdir(cwd)) == []
 
 

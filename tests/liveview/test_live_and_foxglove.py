@@ -344,49 +344,6 @@ def test_replay_serves_a_recording_to_a_protocol_client(live_run, tmp_path):
             decode(data)
 
 
-# --------------------------------------------------------------------------------------------- progress line
-from aerodaas.bench.pipeline import FixedCostDetector  # noqa: E402
-
-
-class CountingDetector(FixedCostDetector):
-    """The fixed-cost stand-in detector with an ObjectDetector's counters (what the progress line shows)."""
-
-    def __init__(self, cost_ms: float) -> None:
-        super().__init__(cost_ms)
-        self.n, self.found = 0, 0
-
-    def process(self, frame, meta):
-        dets = super().process(frame, meta)
-        self.n += 1
-        self.found += bool(dets)
-        return dets
-
-    def stats(self) -> dict:
-        return {"frames": self.n, "frames_with_detections": self.found}
-
-
-@pytest.mark.e2e
-def test_progress_and_summary_count_the_frames_the_cloud_served(ray_session, run_options, tmp_path):
-    """DEMS sends part of an overloaded detector's frames to a cloud executor: the detections shown live and in the
-    summary are those of every executed task, edge and cloud (the edge copy alone saw only its own)."""
-    from aerodaas.runtime.report import format_summary
-    from tests.schedulers.test_analytics_scheduling import QOS, build, hover_config
-
-    env, drone = build(hover_config(fps=15), CountingDetector(80), hover_s=4.0)
-    env.set_analytics_scheduler("DEMS", {"detector": QOS}, cloud_executors=1)
-    res = drone.start_mission(options=run_options)
-    assert res.outcome == "success", res.robots["uav"].get("error")
-    det = next(a for a in res.stats["uav"]["analytics"] if a.get("name") == "detector")
-    tiers = res.stats["analytics_scheduler"]["tiers"]
-    states = res.stats["analytics_scheduler"]["states"]
-    assert det["frames_by_tier"].get("cloud", 0) > 0 and det["frames_by_tier"].get("edge", 0) > 0, det
-    assert det["frames_by_tier"] == {t: n for t, n in det["scheduled"]["executed"].items()}
-    executed = states.get("done_on_time", 0) + states.get("done_late", 0)
-    assert det["frames"] == executed == sum(det["frames_by_tier"].values()) and det["frames"] <= sum(tiers.values())
-    assert det["frames_with_detections"] == det["frames"]  # the stand-in finds its box in every frame
-    assert f"detections in {det['frames']}/{det['frames']} frames" in format_summary(res)
-
-
 # --------------------------------------------------------------------------------------------- npm @mcap/core
 # (The vehicle-tracking recording is validated with validate_recording in tests/runtime/test_e2e.py, on the run that test
 # already makes: one run of the real detector instead of two.)

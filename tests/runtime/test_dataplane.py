@@ -263,7 +263,8 @@ def test_frame_crossing_to_an_analytics_actor_is_put_once_or_encoded_once(ray_se
     materialises is copied once into a same-node channel slot or made in one (lock-step uses the same transport as a
     free-running run) and read in place by the analytics actor; across tiers (cloud) it is JPEG-encoded once by the
     drone actor and decoded once by the analytics actor — nothing else. (The probe keeps every frame, so after the
-    outlet's few slots were lent the frames cannot be made in one: both counters are used.)"""
+    outlet's few slots were lent the frames cannot be made in one: both counters are used.) The lock-step clock
+    waits for the analytics, so it is never late and sheds no frame."""
     env = _env(1, lockstep=True)
     probe = FrameProbe()
     probe.deploy(env.get_compute_resource_by_id(where))
@@ -278,6 +279,7 @@ def test_frame_crossing_to_an_analytics_actor_is_put_once_or_encoded_once(ray_se
     analysed = res.stats["d00"]["analytics"][0]
     n = cam["frames"]
     assert n > 0 and analysed["processed"] == analysed["received"] == n  # lock-step: every frame crossed
+    assert res.robots["d00"]["frames_shed_late"] == 0, res.robots["d00"]
     assert [o["sent"] for o in cam["outlets"]] == [n] and cam["outlets"][0]["dropped"] == 0
     cross = where != "edge"
     assert cam["outlets"][0]["transport"] == ("ray" if cross else "channel")

@@ -141,10 +141,31 @@ def test_a_scheduled_analytics_that_the_app_lacks_or_that_is_not_fed_frames_fail
 
 
 # --------------------------------------------------------------------------------------------- on a local Ray
+class CountingDetector(FixedCostDetector):
+    """The fixed-cost stand-in detector with an ObjectDetector's counters (what the progress line and the summary
+    show)."""
+
+    def __init__(self, cost_ms: float) -> None:
+        super().__init__(cost_ms)
+        self.n, self.found = 0, 0
+
+    def process(self, frame, meta):
+        dets = super().process(frame, meta)
+        self.n += 1
+        self.found += bool(dets)
+        return dets
+
+    def stats(self) -> dict:
+        return {"frames": self.n, "frames_with_detections": self.found}
+
+
 def test_dems_splits_an_overloaded_detector_between_edge_and_cloud(ray_session, run_options, tmp_path):
     """80 ms per frame at 15 FPS: DEMS keeps what the edge can finish in time and sends the rest to the cloud just in
-    time; every result that is on time reaches the downstream analytics."""
-    env, drone = build(hover_config(fps=15), FixedCostDetector(80))
+    time; every result that is on time reaches the downstream analytics. The detections the progress line and the
+    summary show are those of every executed task, edge and cloud (the edge copy alone saw only its own)."""
+    from aerodaas.runtime.report import format_summary
+
+    env, drone = build(hover_config(fps=15), CountingDetector(80))
     env.set_analytics_scheduler("DEMS", {"detector": QOS}, cloud_executors=1)
     run_options.record = str(tmp_path / "dems.mcap")
     res = drone.start_mission(options=run_options)
@@ -163,6 +184,13 @@ def test_dems_splits_an_overloaded_detector_between_edge_and_cloud(ray_session, 
     assert sink["lists"] + sink["stale"] + sink["dropped"] + on_the_way == on_time, (sink, det["outlets"])
     assert sink["lists"] > on_time // 2, sink
     assert rep["utility"] == pytest.approx(on_time * 100 - rep["edge_cost"] - rep["cloud_cost"])
+    # the counters of the tasks executed on either tier, summed by the runtime
+    assert det["frames_by_tier"].get("cloud", 0) > 0 and det["frames_by_tier"].get("edge", 0) > 0, det
+    assert det["frames_by_tier"] == {t: n for t, n in det["scheduled"]["executed"].items()}
+    executed = rep["states"].get("done_on_time", 0) + rep["states"].get("done_late", 0)
+    assert det["frames"] == executed == sum(det["frames_by_tier"].values()) <= sum(rep["tiers"].values())
+    assert det["frames_with_detections"] == det["frames"]  # the stand-in finds its box in every frame
+    assert f"detections in {det['frames']}/{det['frames']} frames" in format_summary(res)
 
 
 @needs_data
