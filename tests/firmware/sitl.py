@@ -37,10 +37,8 @@ AERODAAS = [sys.executable, "-m", "aerodaas.cli"]
 
 #: firmware clock factors (vehicle seconds per wall second); 2-core machines keep up with these
 SPEEDUP = {"ardupilot": 5.0, "px4": 5.0}
-#: PX4's scheduling priority (``nice``), as if it had its own processor: at 5x, SIH steps its 250 Hz physics every
-#: 800 us of wall time (``simulator_sih`` says so at boot) while EKF2 and the controllers run on threads of their
-#: own; starved beside the tests' other load they answer late, and the vehicle flies on stale commands (once,
-#: beside two CPU burners, a vehicle whose estimate said 1 m sat on the ground and skidded through the survey)
+#: PX4's ``nice``, as if it had its own processor: at 5x SIH steps its physics every 800 us of wall time; EKF2 and the
+#: controllers, starved beside the tests' load, answer late (a vehicle whose estimate said 1 m skidded on the ground)
 FIRMWARE_NICE = -10
 #: the three-vehicle fleet's speed-up where it differs from :data:`SPEEDUP` (see :func:`fleet_session`)
 FLEET_SPEEDUP = {"px4": 1.0}
