@@ -37,21 +37,19 @@ AERODAAS = [sys.executable, "-m", "aerodaas.cli"]
 
 #: firmware clock factors (vehicle seconds per wall second); 2-core machines keep up with these
 SPEEDUP = {"ardupilot": 5.0, "px4": 5.0}
-#: PX4's ``nice``, as if it had its own processor: at 5x SIH steps its physics every 800 us of wall time; EKF2 and the
-#: controllers, starved beside the tests' load, answer late (a vehicle whose estimate said 1 m skidded on the ground)
+#: PX4's ``nice``, as if it had its own processor: at 5x SIH steps its physics every 800 us of wall time, and EKF2 and
+#: the controllers starved beside the tests' load answer late (an estimate of 1 m while skidding on the ground)
 FIRMWARE_NICE = -10
 #: the three-vehicle fleet's speed-up where it differs from :data:`SPEEDUP` (see :func:`fleet_session`)
-FLEET_SPEEDUP = {"px4": 1.0}
-FARM_HOME = {"lat": 13.0213, "lon": 77.5671, "alt": 920.0}
+FLEET_SPEEDUP, FARM_HOME = {"px4": 1.0}, {"lat": 13.0213, "lon": 77.5671, "alt": 920.0}
 #: the robots' ``limits.max_speed`` (m/s) per autopilot. Both firmwares run their default parameters plus only what
 #: our backend sets. Stock PX4 SIH's EKF2 assumes an IMU far quieter than the one SIH simulates (SIH: accelerometer
 #: noise (0.5, 1.7, 1.4) m/s^2, gyro (0.14, 0.07, 0.03) rad/s per 200 Hz sample, ``Sih::reconstruct_sensors_signals``;
 #: EKF2 defaults 0.35 m/s^2 and 0.015 rad/s, ``EKF2_ACC_NOISE``/``EKF2_GYR_NOISE``), so the vehicle flies up to
-#: 0.5 m/s (p99) faster than its estimate says (2026-11-24, against SIH's ground truth HIL_STATE_QUATERNION; GNSS
-#: speed minus estimate: the same): no limit PX4 can be given keeps it within 0.55 m/s, and the backend reports that
-#: (``speed_limit_unholdable``, aerodaas/backends/mavlink/speed_margin.py). At 2 m/s the limit holds (ground truth
-#: 1.89 m/s over 1 s against 2.2); holds are better than at 0.5 m/s (where MPC_XY_VEL_MAX 0.25 leaves PX4's position
-#: loop too little authority to follow its own estimate's drift) but not within 0.3 m: see HOLD_RADIUS.
+#: 0.5 m/s (p99) faster than its estimate says (against SIH's ground truth HIL_STATE_QUATERNION; GNSS speed minus
+#: estimate: the same): no limit PX4 can be given keeps it within 0.55 m/s, and the backend reports that
+#: (``speed_limit_unholdable``, aerodaas/backends/mavlink/speed_margin.py). At 2 m/s the limit holds; holds are not
+#: within 0.3 m (at 0.5 m/s MPC_XY_VEL_MAX 0.25 leaves PX4's position loop too little authority): see HOLD_RADIUS.
 MAX_SPEED = {"ardupilot": 0.5, "px4": 2.0}
 #: the waypoints' acceptance radius (m) the SITL surveys fly with per autopilot (``AERODAAS_SITL_HOLD_RADIUS_M`` of
 #: tests/firmware/sitl_survey_app.py and tests/firmware/sitl_fleet_app.py): ArduCopter 0.3 m, apps/farm_survey.py's own. Stock PX4 SIH's
