@@ -28,11 +28,13 @@ a file that no longer offends must be taken off (``test_the_known_lists_are_curr
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
+from tests.architecture import sources
 from tests.architecture.test_layers import MODULES, ROOT, node_targets, one_cycle, strongly_connected
 
 #: the example applications: loaded by ``aerodaas run`` as modules of their own, imported by nothing of ours
@@ -72,9 +74,7 @@ def imports_in(module: str, path: Path) -> list[Import]:
     """Every import of the file ``path`` (dotted name ``module``): statements at any depth and literal
     ``import_module``/``__import__`` calls. A relative import is resolved against ``module``'s package. Raises
     SyntaxError for a file Python cannot parse."""
-    text = path.read_text(encoding="utf-8")
-    lines = text.splitlines()
-    tree = ast.parse(text, str(path))
+    lines = sources.source(path).splitlines()
     is_pkg = path.name == "__init__.py"
     pkg = module if is_pkg else module.rpartition(".")[0]
     out: list[Import] = []
@@ -96,7 +96,7 @@ def imports_in(module: str, path: Path) -> list[Import]:
         for child in ast.iter_child_nodes(node):
             visit(child, deeper)
 
-    visit(tree, False)
+    visit(sources.tree(path), False)
     return out
 
 
@@ -110,8 +110,10 @@ def _targets(mod: str, target: str) -> list[str]:
     return [t for t in ts if t in FILES and t != mod]
 
 
+@functools.lru_cache(maxsize=1)
 def file_graph() -> dict[str, dict[str, list[str]]]:
-    """importing file -> imported file -> the imports that make the edge (``"line 12 (in a function)"``)."""
+    """importing file -> imported file -> the imports that make the edge (``"line 12 (in a function)"``); made once
+    per process, read by several tests."""
     g: dict[str, dict[str, list[str]]] = defaultdict(lambda: defaultdict(list))
     for mod, path in FILES.items():
         for imp in imports_in(mod, path):
@@ -119,7 +121,7 @@ def file_graph() -> dict[str, dict[str, list[str]]]:
             for t in _targets(mod, imp.target):
                 if where not in g[mod][t]:
                     g[mod][t].append(where)
-    return g
+    return {m: dict(ts) for m, ts in g.items()}
 
 
 def cycles(g: dict[str, dict[str, list[str]]]) -> list[tuple[list[str], str]]:

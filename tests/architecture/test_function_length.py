@@ -11,7 +11,10 @@ as the splits land.
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
+
+from tests.architecture import sources
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("aerodaas", "actors", "schedulers", "clusters")
@@ -36,12 +39,13 @@ def _functions(tree: ast.AST, prefix: str = ""):
             yield from _functions(node, prefix)
 
 
+@functools.lru_cache(maxsize=1)
 def _long_functions() -> dict[tuple[str, str], int]:
     out = {}
     for pkg in PACKAGES:
         for path in sorted((ROOT / pkg).rglob("*.py")):
             rel = path.relative_to(ROOT).as_posix()
-            for name, lines in _functions(ast.parse(path.read_text(encoding="utf-8"), rel)):
+            for name, lines in _functions(sources.tree(path)):
                 if lines >= MAX_LINES:
                     out[(rel, name)] = lines
     return out

@@ -10,6 +10,7 @@ import anything and no sub-package imports them. The layer order is in ``docs/ar
 from __future__ import annotations
 
 import ast
+import functools
 import re
 import subprocess
 import sys
@@ -17,6 +18,8 @@ from collections import defaultdict
 from pathlib import Path
 
 import pytest
+
+from tests.architecture import sources
 
 ROOT = Path(__file__).resolve().parents[2]
 #: where each installed package's files are: ``aerodaas.actors`` is the repository's ``actors/`` and so on
@@ -99,17 +102,17 @@ def imports_of(module: str, path: Path) -> list[tuple[str, int]]:
     """(dotted target, line) for every import in the file: module level, in functions, in ``if TYPE_CHECKING``,
     and ``importlib.import_module("literal")`` / ``__import__("literal")``. ``from X import name`` counts as
     ``X.name`` when that is a module of ours, else as ``X``."""
-    tree = ast.parse(path.read_text(), str(path))
     pkg = module if _is_package(module) else module.rpartition(".")[0]
     out: list[tuple[str, int]] = []
-    for node in ast.walk(tree):
+    for node in ast.walk(sources.tree(path)):
         out += [(target, node.lineno) for target in node_targets(node, pkg, MODULES)]
     return out
 
 
+@functools.lru_cache(maxsize=1)
 def package_graph() -> dict[tuple[str, str], list[str]]:
     """(importing sub-package, imported sub-package) → the module-level edges that make it
-    (``"aerodaas.model.types:12 -> aerodaas.model.geo"``)."""
+    (``"aerodaas.model.types:12 -> aerodaas.model.geo"``); made once per process, read by several tests."""
     edges: dict[tuple[str, str], list[str]] = defaultdict(list)
     for mod, path in MODULES.items():
         src = layer_of(mod)

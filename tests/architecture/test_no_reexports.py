@@ -7,8 +7,11 @@ effect, not for a name: a check that an optional dependency is there, or modules
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
+
+from tests.architecture import sources
 
 ROOT = Path(__file__).resolve().parents[2]
 SCANNED = ("aerodaas", "actors", "schedulers", "clusters")
@@ -37,20 +40,20 @@ def _silences_f401(lines: list[str], node: ast.stmt) -> bool:
     return False
 
 
-def reexports(root: Path = ROOT) -> list[tuple[str, int, tuple[str, ...]]]:
+@functools.lru_cache(maxsize=None)
+def reexports(root: Path = ROOT) -> tuple[tuple[str, int, tuple[str, ...]], ...]:
     """(file, line, imported names) of every import that silences F401 in a non-``__init__`` module."""
     found = []
     for top in SCANNED:
         for path in sorted((root / top).rglob("*.py")):
             if path.name == "__init__.py":
                 continue
-            src = path.read_text(encoding="utf-8")
-            lines = src.splitlines()
-            for node in ast.walk(ast.parse(src, filename=str(path))):
+            lines = sources.source(path).splitlines()
+            for node in ast.walk(sources.tree(path)):
                 if isinstance(node, (ast.Import, ast.ImportFrom)) and _silences_f401(lines, node):
                     names = tuple(a.asname or a.name for a in node.names)
                     found.append((path.relative_to(root).as_posix(), node.lineno, names))
-    return found
+    return tuple(found)
 
 
 def test_no_module_re_exports_an_import():
@@ -76,5 +79,5 @@ def test_the_scan_finds_a_re_export(tmp_path):
     (pkg / "other.py").write_text("import sys  # noqa: E402\n")
     for top in SCANNED[1:]:
         (tmp_path / top).mkdir()
-    assert reexports(tmp_path) == [("aerodaas/pkg/bare.py", 1, ("json",)),
-                                   ("aerodaas/pkg/shim.py", 1, ("join", "split"))]
+    assert reexports(tmp_path) == (("aerodaas/pkg/bare.py", 1, ("json",)),
+                                   ("aerodaas/pkg/shim.py", 1, ("join", "split")))
