@@ -53,7 +53,7 @@ import numpy as np
 from aerodaas.actors.data.channel_conn import BufferedConnection
 from aerodaas.actors.data.channel_msgs import ChannelDone, ChannelSend, SlotFrame, SlotFree
 from aerodaas.actors.data.channel_outlet import shutdown_connection
-from aerodaas.actors.data.channel_slots import Segment, attach
+from aerodaas.actors.data.channel_slots import Mapped, attach
 from aerodaas.actors.data.channel_wire import decode, encode_done, encode_free
 from aerodaas.protocol.messages import Delivery, FrameMsg
 
@@ -66,7 +66,7 @@ def channel_address(run_key: bytes, actor_id: str) -> str:
     return "\0aerodaas-" + hashlib.sha256(run_key + actor_id.encode()).hexdigest()[:32]
 
 
-def _freed(freed: deque, wake: threading.Event, name: str, server_thread: int, shm: Segment) -> None:
+def _freed(freed: deque, wake: threading.Event, name: str, server_thread: int, shm: Mapped) -> None:
     """A mapped frame was collected: its slot joins ``freed``; the late-frees thread is woken only off the connection's
     own thread (``server_thread``), whose next answer carries it (a thread switch per frame saved). ``shm``: the
     frame's mapping, held by this finalizer so that it outlives every frame read from it (unmapped when the last
@@ -85,7 +85,7 @@ class _SenderSession:
     def __init__(self, conn: Any) -> None:
         self.conn = conn
         self.send_lock = threading.Lock()
-        self.maps: dict[str, Segment] = {}
+        self.maps: dict[str, Mapped] = {}
         self.freed: deque[str] = deque()
         self.wake = threading.Event()
         self.stop = threading.Event()
@@ -261,7 +261,7 @@ class ChannelServer:
         return True
 
     @staticmethod
-    def _map(sf: SlotFrame, maps: dict[str, Segment], freed: deque, wake: threading.Event,
+    def _map(sf: SlotFrame, maps: dict[str, Mapped], freed: deque, wake: threading.Event,
              server_thread: int) -> np.ndarray:
         """The read-only array over slot ``sf`` (mapped once per slot); when the last reference to it goes, its
         name joins ``freed`` (never a send from a finalizer: it may run inside another send of this thread)."""

@@ -23,7 +23,7 @@ from typing import Any
 
 from aerodaas.clusters.reaper import SEGMENT_NAME, SHM_DIR, segment_prefix, sweep_segments
 
-__all__ = ["Segment", "Slot", "attach", "create_segment", "own_prefix", "release_lent"]
+__all__ = ["Mapped", "Segment", "Slot", "attach", "create_segment", "own_prefix", "release_lent"]
 
 
 def own_prefix() -> str:
@@ -97,11 +97,16 @@ class Segment:
             pass
 
 
+#: a slot segment as mapped: a :class:`Segment` where there is ``/dev/shm``, CPython's ``SharedMemory`` elsewhere (the
+#: same members either way)
+Mapped = Segment | SharedMemory
+
+
 def _has_dev_shm() -> bool:
     return os.path.isdir(SHM_DIR)
 
 
-def create_segment(size: int) -> Segment | SharedMemory:
+def create_segment(size: int) -> Mapped:
     """A new segment of ``size`` bytes named :func:`own_prefix` + 12 random hex digits (23 characters at most: the
     31 of macOS's ``PSHMNAMLEN``); a name in use is drawn again, as ``SharedMemory`` does with its own names. The
     segments that nobody maps any more are unlinked first. Raises OSError when the segment cannot be made (``/dev/shm``
@@ -118,7 +123,7 @@ def create_segment(size: int) -> Segment | SharedMemory:
             continue
 
 
-def attach(name: str) -> Segment | SharedMemory:
+def attach(name: str) -> Mapped:
     """Map the sender's segment ``name`` without making this process its owner (``SharedMemory`` before Python
     3.13, where there is no ``/dev/shm``, registers an attached segment too, which would be unlinked when this process
     exits: undone here). Raises what :class:`Segment` raises (FileNotFoundError when the segment is gone)."""
