@@ -110,8 +110,9 @@ def fastest_true_second(truth: dict, speedup: float) -> tuple[float, int, str]:
     the flight ("" when it does). Airborne: 0.5 m above the lowest sample (the observation ends 1 s after the
     disarm, on the ground, so an observer that started late still has its ground). 1 s of vehicle time is
     1 / ``speedup`` seconds of the observer's clock (HIL_STATE_QUATERNION carries no time stamp on SIH); windows with
-    fewer than two samples (the firmware stopped) are left out. Covered: the observer saw the arm and the disarm,
-    and at least 100 airborne samples span at least half the armed interval."""
+    fewer than two samples (the firmware stopped) are left out. Covered: the observer heard the vehicle disarmed,
+    armed and disarmed again, at least 100 airborne samples span at least half the armed interval, and at least half
+    of them start a window that is measured."""
     import numpy as np
 
     t = np.array(truth["truth"])
@@ -128,6 +129,8 @@ def fastest_true_second(truth: dict, speedup: float) -> tuple[float, int, str]:
     elif len(air) < 100 or span < 0.5 * (disarmed - armed):
         why = (f"{len(air)} airborne of {len(t)} samples span {span:.1f} s of the {disarmed - armed:.1f} s armed "
                f"(first sample {t[0, 0] - armed:+.1f} s from the arm, lowest {t[:, 2].min():.2f} m AMSL)")
+    elif len(means) < 0.5 * len(air):
+        why = f"only {len(means)} of {len(air)} airborne samples start a 1 s window with two samples or more"
     return max(means, default=0.0), len(air), why
 
 
@@ -241,19 +244,26 @@ def test_autopilot_mission_holds_and_reaches(session, autopilot):
 
 def test_mission_upload_start(session, autopilot):
     """`aerodaas mission upload FILE --start --max-speed 2` on the landed vehicle: uploaded with a DO_CHANGE_SPEED
-    2 m/s inserted after the take-off (said), armed, flown by the autopilot at no more than that (an observer on the
-    link sees both waypoints at 2 m) and landed."""
+    2 m/s inserted after the take-off (said), armed, flown by the autopilot at no more than that + 10 % (an observer
+    on the link sees both waypoints at 2 m) and landed. The speed: the estimate's velocity on ArduCopter; on stock PX4
+    SIH, whose position estimate stalls and catches up (one run: 6 m in 2 s, 3.7 m/s, over 4 s 1.97 m/s), the
+    distance the estimate moved over every >= 4 s of vehicle time (:func:`test_speed_stays_within_the_limit`). On
+    PX4 this catches a runaway, not a missing cap: on these 6 m legs the vehicle never reaches its 5 m/s cruise
+    (without ``--max-speed``: 2.47 m/s at most, 1.34 over 4 s); the cap itself is checked by the read-back (the
+    vehicle holds the 5 items sent, the speed change among them)."""
     up = session["upload"]
     assert up["rc"] == 0, up["out"][-2000:]
     assert "inserted: DO_CHANGE_SPEED 2 m/s (--max-speed 2 m/s" in up["out"], up["out"][-2000:]
+    assert "read back: the vehicle holds the 5 items as sent" in up["out"], up["out"][-2000:]
     obs = session["observe"]["observed"]
     assert obs.get("armed") and obs.get("landed"), session["observe"]["out"][-2000:]
     pts = [(s[1], s[2], s[3]) for s in obs["samples"]]
     for wp in ((0.0, 6.0, 2.0), (6.0, 6.0, 2.0)):
         assert min(math.dist(p, wp) for p in pts) < 1.0, wp
     v = max(math.hypot(s[4], s[5]) for s in obs["samples"])
-    print(f"{autopilot} mission upload --start: max speed {v:.2f} m/s (--max-speed 2)")
-    assert v <= 2.0 * 1.1
+    flown = flown_speed([{"t": s[0], "position": s[1:4]} for s in obs["samples"]], 4.0)
+    print(f"{autopilot} mission upload --start: max speed {v:.2f} m/s, flown over 4 s {flown:.2f} m/s (--max-speed 2)")
+    assert (flown if autopilot == "px4" else v) <= 2.0 * 1.1
 
 
 def test_geofence_refusal_through_the_safety_gate(session, autopilot):

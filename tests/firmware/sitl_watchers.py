@@ -142,8 +142,8 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
     disarmed again (+1 s) or ``timeout_s`` wall seconds: SIH's ground truth (HIL_STATE_QUATERNION) and the
     estimate (GLOBAL_POSITION_INT), each asked at 20 Hz. Writes ``{"truth": [[wall_s, horizontal m/s, alt m AMSL],
     ...], "estimate": [[wall_s, horizontal m/s, relative_alt m], ...], "armed_s": wall_s or None, "disarmed_s": wall_s
-    or None}`` (wall: this observer's monotonic clock; the first HEARTBEAT armed, the first disarmed after it;
-    HIL_STATE_QUATERNION carries no time stamp on SIH). ``stop`` (pid, delay_s, stop_s): also what
+    or None}`` (wall: this observer's monotonic clock; the first HEARTBEAT armed after one disarmed, the first
+    disarmed after that; HIL_STATE_QUATERNION carries no time stamp on SIH). ``stop`` (pid, delay_s, stop_s): also what
     :func:`stop_when_flying` does, from this link (one process per UDP port), while observing on. SIGTERM ends
     the observation early, the file written all the same."""
     import signal
@@ -155,6 +155,7 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
     end = time.monotonic() + timeout_s
     truth, est = [], []
     sysid, was, armed_at, disarmed_at, next_req = None, False, None, None, 0.0
+    seen_disarmed = False  # an arm counts only when the vehicle was heard disarmed first (not joined in flight)
     ended: list[int] = []
     signal.signal(signal.SIGTERM, lambda signum, frame: ended.append(signum))
     while time.monotonic() < end and not ended and not (disarmed_at and time.monotonic() - disarmed_at > 1.0):
@@ -180,7 +181,8 @@ def observe_truth(conn: str, out: str, timeout_s: float, stop: tuple[int, float,
             if stop and armed and mavutil.mode_string_v10(msg) in ("GUIDED", "OFFBOARD"):
                 threading.Thread(target=_stop_for, args=stop, daemon=True).start()
                 stop = None
-            if armed and armed_at is None:
+            seen_disarmed = seen_disarmed or not armed
+            if armed and armed_at is None and seen_disarmed:
                 armed_at = now
             was = was or armed
             if was and not armed and disarmed_at is None:

@@ -23,6 +23,7 @@ import pytest
 from aerodaas.emulators.mavlink.trace import run_trace, summarise, trace_emulator
 
 from tests.conftest import skip_or_fail
+from tests.firmware.sitl import FIRMWARE_NICE
 
 pytestmark = pytest.mark.sitl
 
@@ -52,7 +53,8 @@ mount --make-rprivate / && mount --bind "$WORK" /mnt && mount -t tmpfs tmpfs /tm
 B=$(mktemp -d); W=$(mktemp -d); cd /mnt
 for f in "$SITL"/px4/bin/px4-*; do n=$(basename "$f"); case "$n" in *.sh) cp "$f" "$B/";; *) ln -s "$SITL/px4/bin/px4" "$B/$n";; esac; done
 PATH="$B:$PATH" PX4_SIM_MODEL=sihsim_quadx PX4_SIMULATOR=sihsim HEADLESS=1 PX4_SIM_SPEED_FACTOR={speedup} \\
-    PX4_HOME_LAT=13.0213 PX4_HOME_LON=77.5671 PX4_HOME_ALT=920 "$SITL/px4/bin/px4" -d "$SITL/px4/etc" -w "$W" \\
+    PX4_HOME_LAT=13.0213 PX4_HOME_LON=77.5671 PX4_HOME_ALT=920 nice -n {nice} "$SITL/px4/bin/px4" -d "$SITL/px4/etc" \\
+    -w "$W" \\
     > sitl.log 2>&1 &
 P=$!
 "$PY" -m aerodaas.emulators.mavlink.trace udpin:127.0.0.1:14540 --autopilot px4 --out trace.json --wall-limit {wall}
@@ -102,7 +104,8 @@ def _firmware_trace(autopilot: str, tmp_path: Path) -> dict:
     why = _namespace_ok()
     if why:
         skip_or_fail(why)
-    script = (AP_SCRIPT if autopilot == "ardupilot" else PX4_SCRIPT).format(speedup=SPEEDUP, wall=WALL_LIMIT_S)
+    script = (AP_SCRIPT if autopilot == "ardupilot" else PX4_SCRIPT).format(speedup=SPEEDUP, wall=WALL_LIMIT_S,
+                                                                             nice=FIRMWARE_NICE)
     env = {**os.environ, "SITL": str(SITL), "WORK": str(tmp_path), "PY": sys.executable,
            "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
     r = subprocess.run(["unshare", "-n", "-m", "bash", "-c", textwrap.dedent(script)], env=env,
