@@ -20,6 +20,7 @@ from aerodaas.clusters.addresses import check_ray_address
 from aerodaas.clusters.lean_head import without_monitor_and_api_server
 from aerodaas.clusters.node_logs import failed_start_report
 from aerodaas.clusters.local import enable_token_auth
+from aerodaas.clusters.log_monitor import lean_log_monitor
 from aerodaas.clusters.loopback import loopback_only
 from aerodaas.clusters.persistent import attached_address, await_fresh_workers, not_on_cluster_path
 from aerodaas.clusters.ray_exports import light_collision_identifier
@@ -126,6 +127,7 @@ def _start_local(dashboard: bool) -> None:
 
     limit_malloc_arenas()  # the workers' C heap: see the module
     lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
+    lean_log_monitor()  # its idle polls do not grow with every actor the node had (aerodaas.clusters.log_monitor)
     # Ray's processes end with this driver, however it ends (see the module); kept: the process's own
     PROCESS.ray.reaper = reaper.ensure_started() or PROCESS.ray.reaper
     temp_dir = ray_temp_dir()

@@ -15,6 +15,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from aerodaas.clusters.log_monitor import SETTINGS as LOG_MONITOR_SETTINGS
+
 REPO = Path(__file__).resolve().parents[2]
 FILES = ["edge-cloud-onprem.yaml", "edge-cloud-aws.yaml"]
 pytestmark = pytest.mark.skipif(shutil.which("bash") is None, reason="needs bash")
@@ -23,7 +25,7 @@ pytestmark = pytest.mark.skipif(shutil.which("bash") is None, reason="needs bash
 STANDIN = """#!/bin/sh
 echo "$(basename "$0") $*" >> "$CALLS"
 if [ "$1" = "-m" ] && [ "$2" = "venv" ]; then mkdir -p "$3/bin" && cp "$0" "$3/bin/python"; fi
-if [ "$(basename "$0")" = ray ]; then echo "env RAY_AUTH_MODE=$RAY_AUTH_MODE v2=$RAY_enable_autoscaler_v2" >> "$CALLS"; fi
+if [ "$(basename "$0")" = ray ]; then echo "env RAY_AUTH_MODE=$RAY_AUTH_MODE v2=$RAY_enable_autoscaler_v2 RAY_LOG_MONITOR_MANY_FILES_THRESHOLD=$RAY_LOG_MONITOR_MANY_FILES_THRESHOLD RAY_LOG_MONITOR_MAX_OPEN_FILES=$RAY_LOG_MONITOR_MAX_OPEN_FILES" >> "$CALLS"; fi
 exit 0
 """
 
@@ -125,6 +127,8 @@ def test_ray_start_gets_the_ssh_address_label_and_token_mode(name, node):
             assert "--dashboard-host=127.0.0.1" in args, args
         env = calls[calls.index(starts[0]) + 1]
         assert "RAY_AUTH_MODE=token" in env
+        # the log monitor's settings of every node AeroDaaS starts itself (aerodaas.clusters.log_monitor)
+        assert all(f"{k}={v}" in env.split() for k, v in LOG_MONITOR_SETTINGS.items()), env
         if kind == "head" and cfg["provider"]["type"] == "local":
             assert "v2=0" in env  # on-prem: autoscaler v1 whatever `ray up` exports (the YAML's comment says why)
 
