@@ -79,6 +79,8 @@ def pytest_runtest_protocol(item, nextitem):
 
 
 def pytest_runtest_logfinish(nodeid, location):
+    if nodeid not in RECORDS:  # xdist's controller: it reports the workers' tests and runs none
+        return
     _sample(os.getpid())
     CURRENT[0] = "<between tests>"
     RECORDS[nodeid][1] += time.process_time()
