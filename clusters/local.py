@@ -29,9 +29,9 @@ import os
 from typing import TYPE_CHECKING, Any
 
 from aerodaas.clusters import reaper
+from aerodaas.clusters.log_monitor import lean_log_monitor
 from aerodaas.clusters.loopback import loopback_only
 from aerodaas.clusters.ray_tls import use_tls
-from aerodaas.clusters.log_monitor import lean_log_monitor
 from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
 
 if TYPE_CHECKING:
@@ -101,7 +101,7 @@ class LocalCluster:
 
         limit_malloc_arenas()  # the workers' C heap (aerodaas.clusters.worker_memory)
         lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
-        lean_log_monitor()  # idle polls that do not grow with every ended actor (aerodaas.clusters.log_monitor)
+        lean_log_monitor()  # fewer listings of the logs folder when idle (aerodaas.clusters.log_monitor)
 
         # the nodes' processes end with this process, however it ends (None: this process has its reaper already)
         self._reaper = reaper.ensure_started()

@@ -213,7 +213,7 @@ def _serve(cpus: int, warm: int = DEFAULT_WARM_WORKERS) -> None:
 
     limit_malloc_arenas()  # the workers' C heap (aerodaas.clusters.worker_memory)
     lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
-    lean_log_monitor()  # a long-lived node's idle polls stay flat as runs come and go (aerodaas.clusters.log_monitor)
+    lean_log_monitor()  # fewer listings of the logs folder when idle (aerodaas.clusters.log_monitor)
     system_config: dict[str, Any] = {"worker_niceness": 0}
     # the import path the node's workers share with this daemon: without sys.path[0], this module's own start
     # folder (`python -m` puts the caller's working directory there), which workers do not have

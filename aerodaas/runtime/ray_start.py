@@ -127,7 +127,7 @@ def _start_local(dashboard: bool) -> None:
 
     limit_malloc_arenas()  # the workers' C heap: see the module
     lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
-    lean_log_monitor()  # its idle polls do not grow with every actor the node had (aerodaas.clusters.log_monitor)
+    lean_log_monitor()  # fewer listings of the logs folder when idle (aerodaas.clusters.log_monitor)
     # Ray's processes end with this driver, however it ends (see the module); kept: the process's own
     PROCESS.ray.reaper = reaper.ensure_started() or PROCESS.ray.reaper
     temp_dir = ray_temp_dir()

@@ -25,7 +25,7 @@ pytestmark = pytest.mark.skipif(shutil.which("bash") is None, reason="needs bash
 STANDIN = """#!/bin/sh
 echo "$(basename "$0") $*" >> "$CALLS"
 if [ "$1" = "-m" ] && [ "$2" = "venv" ]; then mkdir -p "$3/bin" && cp "$0" "$3/bin/python"; fi
-if [ "$(basename "$0")" = ray ]; then echo "env RAY_AUTH_MODE=$RAY_AUTH_MODE v2=$RAY_enable_autoscaler_v2 RAY_LOG_MONITOR_MANY_FILES_THRESHOLD=$RAY_LOG_MONITOR_MANY_FILES_THRESHOLD RAY_LOG_MONITOR_MAX_OPEN_FILES=$RAY_LOG_MONITOR_MAX_OPEN_FILES" >> "$CALLS"; fi
+if [ "$(basename "$0")" = ray ]; then echo "env RAY_AUTH_MODE=$RAY_AUTH_MODE v2=$RAY_enable_autoscaler_v2 RAY_LOG_MONITOR_MANY_FILES_THRESHOLD=$RAY_LOG_MONITOR_MANY_FILES_THRESHOLD" >> "$CALLS"; fi
 exit 0
 """
 
