@@ -9,7 +9,7 @@ tree, CPU-s of the pytest process itself, wall s) to ``$CPU_BY_TEST_OUT`` with t
 
     PYTHONPATH=docs/bench CPU_BY_TEST_OUT=/tmp/cpu.json python3 -m pytest -p cpu_by_test -n 3 --dist loadfile \\
         -m "not slow" tests
-    python3 docs/bench/cpu_by_test.py /tmp/cpu.*.json          # the costliest files and tests
+    python3 docs/bench/cpu_by_test.py "/tmp/cpu.*.json"        # the costliest files and tests
 
 Processes outside the tree (a daemon that detached, another pytest worker's) are not counted.
 """
@@ -24,7 +24,8 @@ HZ = os.sysconf("SC_CLK_TCK")
 CURRENT = ["<between tests>"]
 RECORDS: dict[str, list[float]] = {}
 LAST: dict[tuple[int, int], float] = {}
-_LOCK = threading.Lock()
+_LOCK = threading.RLock()
+_STARTED: list[bool] = []
 
 
 def _processes() -> dict[int, tuple[int, float, int]]:
@@ -63,34 +64,55 @@ def _loop(root: int) -> None:
         time.sleep(0.2)
         try:
             _sample(root)
-        except OSError:
+        except Exception:  # noqa: BLE001 - a measurement: one bad sample must not stop the others
             pass
 
 
+def _runs_tests(config) -> bool:
+    """False in xdist's controller, which runs no test (every worker's tree is below it)."""
+    return hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None)
+
+
 def pytest_configure(config):
-    threading.Thread(target=_loop, args=(os.getpid(),), daemon=True, name="cpu_by_test").start()
+    if _runs_tests(config):
+        threading.Thread(target=_loop, args=(os.getpid(),), daemon=True, name="cpu_by_test").start()
 
 
-def pytest_runtest_protocol(item, nextitem):
-    CURRENT[0] = item.nodeid
-    RECORDS.setdefault(item.nodeid, [0.0, 0.0, 0.0])
-    RECORDS[item.nodeid][1] -= time.process_time()
-    RECORDS[item.nodeid][2] -= time.monotonic()
+def _switch(to: str) -> None:
+    """Charge what the tree used so far to the current test, then make ``to`` the current one."""
+    with _LOCK:
+        _sample(os.getpid())
+        CURRENT[0] = to
+
+
+def pytest_runtest_logstart(nodeid, location):
+    if nodeid.startswith("<") or not _STARTED:
+        return
+    _switch(nodeid)
+    RECORDS.setdefault(nodeid, [0.0, 0.0, 0.0])
+    RECORDS[nodeid][1] -= time.process_time()
+    RECORDS[nodeid][2] -= time.monotonic()
 
 
 def pytest_runtest_logfinish(nodeid, location):
-    if nodeid not in RECORDS:  # xdist's controller: it reports the workers' tests and runs none
+    if nodeid not in RECORDS or not _STARTED:
         return
-    _sample(os.getpid())
-    CURRENT[0] = "<between tests>"
+    _switch("<between tests>")
     RECORDS[nodeid][1] += time.process_time()
     RECORDS[nodeid][2] += time.monotonic()
 
 
+def pytest_sessionstart(session):
+    if _runs_tests(session.config):
+        _STARTED.append(True)
+
+
 def pytest_sessionfinish(session):
+    if not _STARTED:
+        return
     out = os.environ.get("CPU_BY_TEST_OUT", "/tmp/cpu_by_test.json")
     worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
-    with open(out.replace(".json", f".{worker}.json"), "w") as f:
+    with open(f"{out.removesuffix('.json')}.{worker}.json", "w") as f:
         json.dump({k: {"tree": v[0], "own": v[1], "wall": v[2]} for k, v in RECORDS.items()}, f)
 
 
@@ -99,7 +121,10 @@ def report(paths: list[str], top: int = 30) -> None:
     recs: dict[str, dict] = {}
     for p in paths:
         with open(p) as f:
-            recs.update(json.load(f))
+            for k, r in json.load(f).items():  # "<between tests>" is in every file: added up
+                acc = recs.setdefault(k, {"tree": 0.0, "own": 0.0, "wall": 0.0})
+                for key in acc:
+                    acc[key] += r[key]
     files: dict[str, list[float]] = {}
     for k, r in recs.items():
         acc = files.setdefault(k.split("::")[0], [0.0, 0.0, 0.0])

@@ -18,7 +18,7 @@ import psutil  # noqa: E402
 import ray  # noqa: E402
 
 N = int(sys.argv[1])
-ray.init(num_cpus=2, include_dashboard=False, logging_level="ERROR")
+ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="ERROR")
 monitor = next(p for p in psutil.Process().children(recursive=True) if "log_monitor" in " ".join(p.cmdline()))
 
 
