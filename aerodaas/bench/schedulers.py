@@ -56,6 +56,8 @@ from aerodaas.schedulers.analytics_base import (Workload, analytics_scheduler_na
 from aerodaas.schedulers.dispatch.emulation import Jitter, NetworkModel
 from aerodaas.schedulers.dispatch.stats import Samples
 
+#: how often a run configures its edge hosts, the lead time doubling each time, before it gives up (RuntimeError)
+LEAD_TRIES = 3
 
 
 # ---------------------------------------------------------------------------------------------- cluster
@@ -158,16 +160,23 @@ def _run_one(hosts, host_edges: list[list[str]], cloud, name: str, workload, tra
              edge_jitter: str, cloud_jitter: str, network: Sequence[str] | None, drain_s: float,
              reply_lead_ms: float, options: dict | None = None) -> list[dict]:
     t = time.time()
-    # lead time for configure(): each host builds its dispatchers and loads the compiled planner; 0.5 s was overrun
-    # with 9 hosts at load average ~40 (2 cores), which aborted the run before its first arrival
-    start_epoch = time.time() + 2.0 + 0.05 * sum(len(e) for e in host_edges) / max(1, len(hosts))
-    ray.get([h.configure.remote(scheduler=name, workload=workload, edge_ids=edges, cloud_executors=cloud,
-                                start_epoch=start_epoch, edge_jitter=edge_jitter, cloud_jitter=cloud_jitter,
-                                network=network, seed=seed, reply_lead_ms=reply_lead_ms,
-                                scheduler_kwargs=options or None)
-            for h, edges in zip(hosts, host_edges)])
-    if time.time() > start_epoch:
-        raise RuntimeError("configuring the edge hosts took longer than the run's lead time")
+    # lead time for configure(): each host builds its dispatchers and loads the compiled planner before the run's
+    # time origin; a loaded machine can overrun it (9 hosts at load ~40 overran 0.5 s), so an overrun configures
+    # every host again (configure() closes what it had) with twice the lead, at most LEAD_TRIES times
+    lead_s = 2.0 + 0.05 * sum(len(e) for e in host_edges) / max(1, len(hosts))
+    for _ in range(LEAD_TRIES):
+        start_epoch = time.time() + lead_s
+        ray.get([h.configure.remote(scheduler=name, workload=workload, edge_ids=edges, cloud_executors=cloud,
+                                    start_epoch=start_epoch, edge_jitter=edge_jitter, cloud_jitter=cloud_jitter,
+                                    network=network, seed=seed, reply_lead_ms=reply_lead_ms,
+                                    scheduler_kwargs=options or None)
+                for h, edges in zip(hosts, host_edges)])
+        if time.time() <= start_epoch:
+            break
+        lead_s *= 2.0
+    else:
+        raise RuntimeError(f"configuring the edge hosts took longer than the run's lead time {LEAD_TRIES} times "
+                           f"(the last lead: {lead_s / 2.0:.1f} s)")
     outs = ray.get([h.run_trace.remote(tr, drain_s) for h, tr in zip(hosts, trace_by_host)])
     ray.get([h.close.remote() for h in hosts])
     return outs + [{"wall_s": time.time() - t}]
