@@ -48,15 +48,15 @@ FLEET_SPEEDUP, FARM_HOME = {"px4": 1.0}, {"lat": 13.0213, "lon": 77.5671, "alt":
 #: EKF2 defaults 0.35 m/s^2 and 0.015 rad/s, ``EKF2_ACC_NOISE``/``EKF2_GYR_NOISE``), so the vehicle flies up to
 #: 0.5 m/s (p99) faster than its estimate says (against SIH's ground truth HIL_STATE_QUATERNION; GNSS speed minus
 #: estimate: the same): no limit PX4 can be given keeps it within 0.55 m/s, and the backend reports that
-#: (``speed_limit_unholdable``, aerodaas/backends/mavlink/speed_margin.py). At 2 m/s the limit holds; holds are not
-#: within 0.3 m (at 0.5 m/s MPC_XY_VEL_MAX 0.25 leaves PX4's position loop too little authority): see HOLD_RADIUS.
+#: (``speed_limit_unholdable``, aerodaas/backends/mavlink/speed_margin.py). At 2 m/s the limit holds; see HOLD_RADIUS.
 MAX_SPEED = {"ardupilot": 0.5, "px4": 2.0}
-#: the waypoints' acceptance radius (m) the SITL surveys fly with per autopilot (``AERODAAS_SITL_HOLD_RADIUS_M`` of
-#: tests/firmware/sitl_survey_app.py and tests/firmware/sitl_fleet_app.py): ArduCopter 0.3 m, apps/farm_survey.py's own. Stock PX4 SIH's
-#: estimate wanders from the setpoint PX4 holds it at (the same estimator mismatch as above): its holds at 2 m/s
-#: had a largest error of 0.59-0.69 m and gathered 2.1-4.9 of 5 s within 0.3 m in 15 s (2026-11-24), so the
-#: survey's 0.3 m is not what that vehicle can hold; PX4's own default acceptance radius (NAV_ACC_RAD) is 2 m.
+#: the waypoints' acceptance radius (m) of the SITL surveys (``AERODAAS_SITL_HOLD_RADIUS_M`` of sitl_survey_app.py and
+#: sitl_fleet_app.py): ArduCopter 0.3 m, apps/farm_survey.py's own. Stock PX4 SIH's estimate wanders from the setpoint
+#: (the estimator mismatch above): its holds at 2 m/s erred up to 0.59-0.69 m, 2.1-4.9 of 5 s within 0.3 m.
 HOLD_RADIUS = {"ardupilot": 0.3, "px4": 1.0}
+#: PX4 counts a multicopter waypoint reached within the acceptance radius horizontally and this (m) in altitude
+#: (NAV_MC_ALT_RAD, default 0.8; navigator mission_block.cpp): its hold may be up to hypot(HOLD_RADIUS, this) away
+PX4_ALT_RAD_M = 0.8
 
 
 def namespace_skip_reason() -> str | None:
