@@ -47,6 +47,8 @@ _AP_SPEED = "WPNAV_SPEED"
 _PX4_SPEED = ("MPC_XY_CRUISE", "MPC_XY_VEL_MAX")
 _PARAMS = {"ardupilot": ("WPNAV_SPEED", "WPNAV_SPEED_UP", "WPNAV_SPEED_DN"),
            "px4": ("MPC_XY_CRUISE", "MPC_XY_VEL_MAX", "MPC_Z_VEL_MAX_UP", "MPC_Z_VEL_MAX_DN")}
+#: mission uploads started again after the vehicle gave one up (:func:`_mission`)
+MISSION_UPLOAD_TRIES = 3
 _REFUSAL_WORDS = ("arm", "prearm", "preflight", "denied", "fail", "need", "not ")
 _STREAMS_HZ = {M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0, M.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
                M.MAVLINK_MSG_ID_HOME_POSITION: 1.0, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 2.0,
@@ -370,10 +372,19 @@ def _mission(T: _Tracer, tr: dict, leg1: float, leg2: float, hold: float,
         items.insert(0, (M.MAV_CMD_NAV_WAYPOINT, lat0, lon0, 0.0, 0.0))
     T.mission = items
     tr["stage"] = "mission upload"
-    T.m.mav.mission_count_send(T.sysid, T.compid, len(items), M.MAV_MISSION_TYPE_MISSION)
-    if not T.wait(lambda: bool(T.mission_acks), 15.0):
-        return None
+    # a transfer the vehicle gave up on is started again from the count, as the mission protocol lets a ground
+    # station do (mavlink.io, "Mission Protocol"): PX4 drops one when nothing arrives for 5 s of its own clock
+    # ("Operation timeout", MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT, src/modules/mavlink/mavlink_mission.cpp), 1 s
+    # of wall time at 5x: a loaded machine's tracer answered later and PX4 ignored its items
+    for tries in range(1, MISSION_UPLOAD_TRIES + 1):
+        T.mission_acks.clear()
+        T.m.mav.mission_count_send(T.sysid, T.compid, len(items), M.MAV_MISSION_TYPE_MISSION)
+        if not T.wait(lambda: bool(T.mission_acks), 15.0):
+            return None
+        if T.mission_acks[-1] == M.MAV_MISSION_ACCEPTED:
+            break
     tr["mission_ack"] = M.enums["MAV_MISSION_RESULT"][T.mission_acks[-1]].name
+    tr["mission_upload_tries"] = tries
     n_texts = len(T.texts)
     tr["stage"] = "mission"
     first = 0 if T.px4 else 1
