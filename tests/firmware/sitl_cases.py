@@ -263,8 +263,11 @@ def test_mission_upload_start(session, autopilot):
     obs = session["observe"]["observed"]
     assert obs.get("armed") and obs.get("landed"), session["observe"]["out"][-2000:]
     pts = [(s[1], s[2], s[3]) for s in obs["samples"]]
+    # PX4 judged horizontally, as its own reached check is: the observer never arms, so its height is PX4's
+    # relative_alt, which drifts on SIH (see test_three_vehicles_behind_one_router_port)
+    n = 2 if autopilot == "px4" else 3
     for wp in ((0.0, 6.0, 2.0), (6.0, 6.0, 2.0)):
-        assert min(math.dist(p, wp) for p in pts) < 1.0, wp
+        assert min(math.dist(p[:n], wp[:n]) for p in pts) < 1.0, wp
     v = max(math.hypot(s[4], s[5]) for s in obs["samples"])
     flown = flown_speed([{"t": s[0], "position": s[1:4]} for s in obs["samples"]], 4.0)
     print(f"{autopilot} mission upload --start: max speed {v:.2f} m/s, flown over 4 s {flown:.2f} m/s (--max-speed 2)")
