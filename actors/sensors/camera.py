@@ -248,13 +248,16 @@ class CameraComponent:
             self._tick_cond.wait_for(lambda: self._halted or self._tick_clock[1] >= mono, timeout=TICK_WAIT_S)
             return self._tick_clock
 
-    def _pose_after(self, t: float) -> None:
+    def _pose_after(self, t: float) -> float:
         """Wait until a position sample at or after run time ``t`` (s, a stream frame's capture) was kept, so that
         the frame's pose is interpolated between samples that enclose it: at most :data:`POSE_WAIT_S`, not when the
-        mission is over (the clock's ticks bring the samples: :meth:`try_capture` notifies)."""
+        mission is over (the clock's ticks bring the samples: :meth:`try_capture` notifies). Returns how long it
+        waited (host seconds)."""
+        t0 = time.monotonic()
         with self._tick_cond:
             self._tick_cond.wait_for(lambda: self._halted or (bool(self._poses) and self._poses[-1][0] >= t),
                                      timeout=POSE_WAIT_S)
+        return time.monotonic() - t0
 
     def _gimbal(self, t: float) -> Any:
         """The gimbal's attitude now (the clock thread, at the frame's tick at run time ``t`` s), kept for the
@@ -395,7 +398,8 @@ class CameraComponent:
         hand-off), ``stream_seq``, the vehicle pose at capture (``position`` ENU m, ``yaw`` ENU deg) and
         ``pose_samples_t``: the run times (s) of the two vehicle position samples it was interpolated between (their
         own times, not the ticks' that read them; a capture after the newest sample waits for the next one:
-        :meth:`_pose_after`), or of the one used outside them."""
+        :meth:`_pose_after`), or of the one used outside them; ``pose_wait_s``: how long (host s) it waited for that
+        next sample (:data:`POSE_WAIT_S` when none came: the newest one is held)."""
         for ev in self.stream.drain_events():
             if self.on_event is not None:
                 self.on_event(ev.kind, sensor=self.sensor_id, **ev.fields)
@@ -412,7 +416,7 @@ class CameraComponent:
         capture_t = max(tick_t - max(0.0, tick_mono - capture_mono), self._last_capture_t + 1e-6)
         arrival_t = max(tick_t - (tick_mono - f.arrival_mono), capture_t)
         self._last_capture_t = capture_t
-        self._pose_after(capture_t)
+        waited = self._pose_after(capture_t)
         position, yaw, pose_t, samples_t = pose_sampled_at(list(self._poses), capture_t)
         pose = FramePose(position=position, yaw=yaw, camera_pitch=self.pitch)
         self.latency_ms.append((now - f.capture_mono) * 1e3)
@@ -420,7 +424,7 @@ class CameraComponent:
         return f.image, pose, {"capture_t": capture_t, "arrival_t": arrival_t, "pose_t": pose_t,
                                "stream_seq": f.seq, "age_ms": round((now - f.capture_mono) * 1e3, 2),
                                "position": [float(c) for c in position], "yaw": float(yaw),
-                               "pose_samples_t": list(samples_t)}
+                               "pose_samples_t": list(samples_t), "pose_wait_s": round(waited, 4)}
 
     def close(self) -> None:
         """Close the frame source; a video stream's reader (if any) records its final counters on

@@ -149,7 +149,7 @@ def _flight_timing(pose_of: str, latency_s: float = 0.5, speed: float = 5.0) -> 
         if pose_of == "arrival_relabelled":
             samples = pose_sampled_at(known, capture)[3]
         timing.append({"seq": k, "capture_t": capture, "arrival_t": arrival, "pose_t": pose_t, "position": list(pos),
-                       "yaw": yaw, "pose_samples_t": list(samples)})
+                       "yaw": yaw, "pose_samples_t": list(samples), "pose_wait_s": 0.0})
     return timing, odometry
 
 
@@ -172,6 +172,31 @@ def test_the_pose_tag_check_fails_on_a_pose_taken_at_arrival():
     for few in ([], odometry[:1], [o for o in odometry if o["t"] > 19.5]):
         with pytest.raises(AssertionError, match=r"no pose tag was compared with the odometry"):
             check_pose_tags(timing, few)
+
+
+def test_a_held_pose_passes_only_when_the_camera_waited_for_a_newer_sample():
+    """Samples that reached the camera late (a loaded machine: the recorded odometry shows no such gap): for five
+    frames the camera held a sample 0.4 s older than the capture. check_pose_tags passes them when their FrameTiming
+    says the camera waited its full POSE_WAIT_S for a newer sample, and fails the same poses from a camera that did
+    not wait (a stale pose while newer samples were there)."""
+    import math
+
+    from aerodaas.actors.sensors.camera import POSE_WAIT_S
+
+    timing, odometry = _flight_timing("capture")
+
+    def stalled(wait_s: float) -> list[dict]:
+        out = [dict(m) for m in timing]
+        for m in out[50:55]:
+            t0 = round(m["capture_t"] - 0.4, 1)  # an older 20 Hz tick's sample, the vehicle's own position then
+            m.update(pose_samples_t=[t0], pose_t=t0, position=[5.0 * t0, 2.0 * math.sin(t0), 16.0], pose_wait_s=wait_s)
+        return out
+
+    got = check_pose_tags(stalled(POSE_WAIT_S), odometry)
+    assert got["held"] == 5 and got["compared"] == got["judged"] > 150
+    with pytest.raises(AssertionError, match=r"pose from the samples at \[.*\] s, captured at .* waited 0.0 s"):
+        check_pose_tags(stalled(0.0), odometry)
+    assert check_pose_tags(timing, odometry)["held"] == 0  # interpolated poses: none held
 
 
 def test_angles_at_interpolates_each_angle_along_the_short_arc():

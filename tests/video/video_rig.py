@@ -233,8 +233,10 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
 
     1. the vehicle's position samples it was interpolated between (``pose_samples_t``: their own times) enclose ``capture_t``, or the one sample used outside them is within :data:`POSE_SAMPLE_SLACK_S`
        after it, or older than it by no more than the vehicle's own largest sample gap there (a stalled stream of
-       samples) plus :data:`AFTER_NEWEST_SLACK_S`: a pose taken at the arrival (20-300 ms later) is bracketed by
-       later samples;
+       samples) plus :data:`AFTER_NEWEST_SLACK_S`, or older by any amount when the frame's ``pose_wait_s`` says the
+       camera waited its full :data:`~aerodaas.actors.sensors.camera.POSE_WAIT_S` for a newer one (samples that
+       reached it late on a loaded machine, a delay the recording does not show: its position is still judged by 2):
+       a pose taken at the arrival (20-300 ms later) is bracketed by later samples;
     2. its ``position`` (ENU m) agrees with the recording's own ``odometry`` (the ``/<robot>/odometry`` messages:
        ``t`` s, ``position``, ``velocity``) interpolated at ``capture_t``, for every frame the odometry surrounds.
 
@@ -247,9 +249,13 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
     which widens the gaps and so the tolerance with them: it cannot break the check; a pose taken at arrival
     instead of capture can (tests/video/test_video_source.py fabricates one). Raises AssertionError naming the frame, or
     when no frame's tag could be compared with the odometry (none inside its time span: a check of zero poses).
-    Returns ``{"judged": frames judged by 1, "compared": frames judged by 2, "worst_m": largest position error,
-    "worst_ratio": largest error / tolerance}``."""
+    Returns ``{"judged": frames judged by 1, "held": of them, poses held after the camera's full wait, "compared":
+    frames judged by 2, "worst_m": largest position error, "worst_ratio": largest error / tolerance}``."""
+    from aerodaas.actors.sensors.camera import POSE_WAIT_S
+
     assert timing, "no frame timing recorded"
+    unwaited = [m["seq"] for m in timing if "pose_wait_s" not in m]
+    assert not unwaited, f"frames without the camera's pose_wait_s: {unwaited[:10]}"
     t_first = timing[0]["arrival_t"]
     late = [m for m in timing if m["arrival_t"] > t_first + settle_s]
     assert late, "no frame arrived a second after the first: no pose tag to judge"
@@ -264,11 +270,15 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
                      int(np.searchsorted(times, t + GAP_WINDOW_S)))
         return float(np.max(gaps[near], initial=0.0))
 
+    held = 0
     for m in late:
         samples, c = m["pose_samples_t"], m["capture_t"]
-        assert samples and (samples[0] <= c <= samples[-1] if len(samples) == 2
-                            else -stall_near(c) - AFTER_NEWEST_SLACK_S <= samples[0] - c <= POSE_SAMPLE_SLACK_S), \
-            f"frame {m['seq']}: pose from the samples at {samples} s, captured at {c} s (arrived at {m['arrival_t']} s)"
+        waited = len(samples) == 1 and samples[0] < c and m.get("pose_wait_s", 0.0) >= POSE_WAIT_S
+        held += waited
+        assert samples and (samples[0] <= c <= samples[-1] if len(samples) == 2 else waited
+                            or -stall_near(c) - AFTER_NEWEST_SLACK_S <= samples[0] - c <= POSE_SAMPLE_SLACK_S), \
+            (f"frame {m['seq']}: pose from the samples at {samples} s, captured at {c} s (arrived at {m['arrival_t']} "
+             f"s, waited {m.get('pose_wait_s')} s for a newer sample)")
     compared, worst_m, worst_ratio = 0, 0.0, 0.0
     if len(odo) >= 2:
         chord = [float(np.linalg.norm(b[1] - a[1])) / g for a, b, g in zip(odo, odo[1:], gaps) if g > 0]
@@ -291,7 +301,7 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
             worst_m, worst_ratio = max(worst_m, err), max(worst_ratio, err / float(tol))
     assert compared >= 1, (f"no pose tag was compared with the odometry ({len(late)} frames judged by their ticks, "
                            f"{len(odo)} odometry samples): a check of zero poses cannot fail")
-    return {"judged": len(late), "compared": compared, "worst_m": worst_m, "worst_ratio": worst_ratio}
+    return {"judged": len(late), "held": held, "compared": compared, "worst_m": worst_m, "worst_ratio": worst_ratio}
 
 
 def free_tcp_port() -> int:
