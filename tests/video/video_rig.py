@@ -273,12 +273,12 @@ def check_pose_tags(timing: list[dict], odometry: list[dict], settle_s: float = 
     held = 0
     for m in late:
         samples, c = m["pose_samples_t"], m["capture_t"]
-        waited = len(samples) == 1 and samples[0] < c and m.get("pose_wait_s", 0.0) >= POSE_WAIT_S
+        waited = len(samples) == 1 and samples[0] < c and m["pose_wait_s"] >= POSE_WAIT_S
         held += waited
         assert samples and (samples[0] <= c <= samples[-1] if len(samples) == 2 else waited
                             or -stall_near(c) - AFTER_NEWEST_SLACK_S <= samples[0] - c <= POSE_SAMPLE_SLACK_S), \
             (f"frame {m['seq']}: pose from the samples at {samples} s, captured at {c} s (arrived at {m['arrival_t']} "
-             f"s, waited {m.get('pose_wait_s')} s for a newer sample)")
+             f"s, waited {m['pose_wait_s']} s for a newer sample)")
     compared, worst_m, worst_ratio = 0, 0.0, 0.0
     if len(odo) >= 2:
         chord = [float(np.linalg.norm(b[1] - a[1])) / g for a, b, g in zip(odo, odo[1:], gaps) if g > 0]
