@@ -34,8 +34,6 @@ import importlib
 import os
 import sys
 
-from aerodaas.clusters.node_priority import reset_worker_priority
-
 __all__ = ["ADDONS", "ARENAS", "BLAS_THREADS", "SETUP_HOOK", "SETUP_HOOK_ENV", "addons_only_when_imported",
            "lean_worker_imports", "limit_malloc_arenas", "one_blas_thread", "worker_setup"]
 
@@ -74,10 +72,8 @@ def lean_worker_imports() -> bool:
 
 
 def worker_setup() -> None:
-    """Ray worker setup hook: the worker back at its driver's niceness
-    (:func:`aerodaas.clusters.node_priority.reset_worker_priority`), then :func:`addons_only_when_imported` and
-    :func:`one_blas_thread` in the worker (see the module)."""
-    reset_worker_priority()
+    """Ray worker setup hook: :func:`addons_only_when_imported` and :func:`one_blas_thread` in the worker (see the
+    module)."""
     if addons_only_when_imported():
         one_blas_thread()
 

@@ -19,7 +19,7 @@ from aerodaas.clusters import reaper
 from aerodaas.clusters.addresses import check_ray_address
 from aerodaas.clusters.lean_head import without_monitor_and_api_server
 from aerodaas.clusters.node_logs import failed_start_report
-from aerodaas.clusters.node_priority import raised_node_priority
+from aerodaas.clusters.node_priority import agents_ahead
 from aerodaas.clusters.local import enable_token_auth
 from aerodaas.clusters.log_monitor import lean_log_monitor
 from aerodaas.clusters.loopback import loopback_only
@@ -127,7 +127,7 @@ def _start_local(dashboard: bool) -> None:
     import ray  # lazy: heavy ray
 
     limit_malloc_arenas()  # the workers' C heap: see the module
-    hook = lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
+    lean_worker_imports()  # no pyarrow in the workers (aerodaas.clusters.worker_memory)
     lean_log_monitor()  # fewer listings of the logs folder when idle (aerodaas.clusters.log_monitor)
     # Ray's processes end with this driver, however it ends (see the module); kept: the process's own
     PROCESS.ray.reaper = reaper.ensure_started() or PROCESS.ray.reaper
@@ -142,10 +142,9 @@ def _start_local(dashboard: bool) -> None:
             # process on the machine (a SITL autopilot, a compiler) starve their control loops.
             # Without the dashboard, no autoscaler monitor and no API server: they serve such a run nothing and
             # lie on the path to the first frame (aerodaas.clusters.lean_head)
-            # Ray's node processes start ahead of the machine's load, its workers back at ours (by the setup hook):
-            # the raylet aborts when its agents take over 15 s to start (aerodaas.clusters.node_priority)
-            with (contextlib.nullcontext() if dashboard else without_monitor_and_api_server()), \
-                    (raised_node_priority() if hook else contextlib.nullcontext()):
+            # the node's agents start ahead of the machine's load: the raylet aborts when they take over 15 s to
+            # write their ports (aerodaas.clusters.node_priority)
+            with (contextlib.nullcontext() if dashboard else without_monitor_and_api_server()), agents_ahead():
                 ray.init(address="local", labels={"tier": "edge"}, include_dashboard=dashboard,
                          dashboard_host="127.0.0.1", log_to_driver=True, _system_config={"worker_niceness": 0},
                          num_cpus=3, configure_logging=True, logging_level="warning", _temp_dir=temp_dir)

@@ -1,18 +1,16 @@
-"""A run's own local Ray starts its node processes (GCS, raylet, its agents, the log monitor) 5 below the driver's
-niceness, so that a loaded machine does not starve the raylet's agents past Ray's fixed 15 s wait for their ports;
-the workers, every thread of them, and the driver's own threads stay at the driver's niceness
-(``aerodaas.clusters.node_priority``). Read from /proc, per thread, on a real local Ray started as ``aerodaas run``
-starts it."""
+"""A run's own local Ray starts its raylet's two agents 5 below the driver's niceness, so that a loaded machine does
+not starve them past Ray's fixed 15 s wait for their ports; the GCS, the raylet, the log monitor, the workers and the
+driver, every thread of each, stay at the driver's niceness (``aerodaas.clusters.node_priority``). Read from /proc,
+per thread, on a real local Ray started as ``aerodaas run`` starts it."""
 from __future__ import annotations
 
 import json
 import os
 import subprocess
 import sys
-import threading
 from pathlib import Path
 
-from aerodaas.clusters.node_priority import NODE_NICE_DELTA, raised_node_priority
+from aerodaas.clusters.node_priority import AGENT_NICE_DELTA, agents_ahead, may_lower_niceness
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -53,32 +51,13 @@ ray.shutdown()
 """
 
 
-def _may_lower_niceness() -> bool:
-    """Whether this process may lower a niceness (CAP_SYS_NICE): tried on a thread of its own."""
-    out: list[bool] = []
-
-    def attempt() -> None:
-        tid = threading.get_native_id()
-        nice = os.getpriority(os.PRIO_PROCESS, tid)
-        try:
-            os.setpriority(os.PRIO_PROCESS, tid, nice - 1)
-            out.append(True)
-        except OSError:
-            out.append(False)
-
-    t = threading.Thread(target=attempt)
-    t.start()
-    t.join()
-    return out[0]
-
-
-def test_the_node_starts_ahead_of_the_load_and_the_workers_and_driver_stay_at_the_drivers_niceness():
+def test_the_agents_start_ahead_of_the_load_and_everything_else_at_the_drivers_niceness():
     env = {k: v for k, v in os.environ.items() if k not in ("AERODAAS_NODE_NICE", "RAY_ADDRESS")}
     r = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=600, cwd=ROOT, env=env)
     assert r.returncode == 0, r.stderr[-3000:]
     out = json.loads(r.stdout.strip().splitlines()[-1])
     mine = os.getpriority(os.PRIO_PROCESS, 0)
-    node = mine + NODE_NICE_DELTA if _may_lower_niceness() else mine
+    agent = mine + AGENT_NICE_DELTA if may_lower_niceness() else mine
     by_kind: dict[str, list] = {}
     for pid, (cmd, nices) in out["procs"].items():
         kind = next((k for k in ("gcs_server", "raylet", "DashboardAgent", "RuntimeEnvAgent", "log_monitor")
@@ -86,18 +65,26 @@ def test_the_node_starts_ahead_of_the_load_and_the_workers_and_driver_stay_at_th
         if kind:
             by_kind.setdefault(kind, []).append(nices)
     assert {"gcs_server", "raylet", "DashboardAgent", "RuntimeEnvAgent", "log_monitor", "worker"} <= set(by_kind), out
-    for kind in ("gcs_server", "raylet", "DashboardAgent", "RuntimeEnvAgent", "log_monitor"):
-        assert by_kind[kind] == [[node]], (kind, by_kind[kind], node)
+    for kind in ("DashboardAgent", "RuntimeEnvAgent"):
+        assert by_kind[kind] == [[agent]], (kind, by_kind[kind], agent)
+    for kind in ("gcs_server", "raylet", "log_monitor"):
+        assert by_kind[kind] == [[mine]], (kind, by_kind[kind], mine)
     # every thread of every worker (the actor's and the idle ones) and of the driver at the driver's niceness
     assert out["actor"] == [mine] and all(n == [mine] for n in by_kind["worker"]), (out["actor"], by_kind["worker"])
     assert out["driver"] == [mine], out["driver"]
 
 
 def test_turned_off_it_changes_nothing(monkeypatch):
+    from ray._private import services
+
+    build = services._build_python_executable_command_memory_profileable
     monkeypatch.setenv("AERODAAS_NODE_NICE", "0")
-    monkeypatch.delenv("AERODAAS_WORKER_NICE", raising=False)
-    tid = threading.get_native_id()
-    before = os.getpriority(os.PRIO_PROCESS, tid)
-    with raised_node_priority() as on:
-        assert not on and os.getpriority(os.PRIO_PROCESS, tid) == before
-    assert "AERODAAS_WORKER_NICE" not in os.environ
+    with agents_ahead() as on:
+        assert not on and services._build_python_executable_command_memory_profileable is build
+    monkeypatch.delenv("AERODAAS_NODE_NICE")
+    with agents_ahead() as on:  # in effect: only the agents' commands change, and Ray's module is restored after
+        cmd = services._build_python_executable_command_memory_profileable("dashboard_agent", "/tmp")
+        other = services._build_python_executable_command_memory_profileable("dashboard", "/tmp")
+        assert (cmd[1:3] == ["-n", str(AGENT_NICE_DELTA)]) == on == may_lower_niceness()
+        assert other == build("dashboard", "/tmp")
+    assert services._build_python_executable_command_memory_profileable is build
