@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[2]
 #: starts a local Ray through aerodaas.runtime.ray_start, starts an actor, prints the niceness of every thread of
 #: the driver, the actor and each of the driver's descendants (by command line) as JSON
 _PROBE = r"""
-import json, os, threading
+import json, os
 import ray
 from aerodaas.runtime.ray_start import init_ray
 from aerodaas.clusters import reaper
