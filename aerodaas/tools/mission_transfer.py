@@ -121,12 +121,31 @@ def _cruise_speed(backend) -> float | None:
     return got[name] * unit if name in got else None
 
 
-def _check_read_back(backend, sent, name: str) -> None:
-    """Download the vehicle's mission and compare it with ``sent`` (:func:`~aerodaas.missionfile.upload.
+def _upload_and_read_back(backend, items, name: str, where: str, connection: str) -> tuple[list, list]:
+    """Upload ``items`` and download what the vehicle then holds; returns ``(sent, stored)``. A vehicle that holds
+    another number of items than it has just accepted replaced our mission with another one: it is uploaded once
+    more, said on stderr. PX4 can do that right after an upload (``src/modules/mavlink/mavlink_mission.cpp``,
+    ``MavlinkMissionManager::check_active_mission``: a mission state published on its ``mission`` topic with
+    another mission id, such as one its navigator published meanwhile, replaces the count just stored)."""
+    def once() -> tuple[list, list]:
+        sent = backend.mission.upload(items)
+        print(f"{name}: {len(sent)} items from {where} uploaded to the {backend.link.autopilot} vehicle on "
+              f"{connection}", flush=True)
+        return sent, backend.mission.download().items
+
+    sent, stored = once()
+    if len(stored) != len(sent):
+        print(f"{name}: note: right after accepting the {len(sent)} items the vehicle holds {len(stored)}: "
+              f"another mission replaced it; uploading it once more", file=sys.stderr, flush=True)
+        sent, stored = once()
+    return sent, stored
+
+
+def _check_read_back(sent, stored, name: str) -> None:
+    """Compare the vehicle's mission ``stored`` with ``sent`` (:func:`~aerodaas.missionfile.upload.
     mission_differences`): prints what it stored differently; raises BackendError when that changes the flight
     (command, the frame, position or altitude of a command with a position, a hold time or speed, the number of
     items)."""
-    stored = backend.mission.download().items
     diffs = mission_differences(sent, stored)
     flight = [d for d in diffs if d.flight]
     for d in diffs:
@@ -151,7 +170,8 @@ def upload(request: Upload) -> int:
     them (each item changed is printed, :func:`~aerodaas.missionfile.upload.cap_speeds`), each command without a
     position in ``MAV_FRAME_MISSION`` (printed, :func:`~aerodaas.missionfile.upload.mission_frames`); no other
     vehicle parameter is changed. The mission is then read back and compared as each autopilot stores it
-    (:func:`~aerodaas.missionfile.upload.mission_differences`; a different flight: exit 2, not started).
+    (:func:`~aerodaas.missionfile.upload.mission_differences`; a different flight: exit 2, not started; a vehicle
+    holding another number of items than it has just accepted gets it once more, :func:`_upload_and_read_back`).
     ``--key-file``: the link signed with that key as the backend signs it (``mavlink.signing_key_file``); a key file
     that cannot be used or a vehicle that does not answer signed: exit 2 (as for a refused file or bound, named)."""
     return _transfer(request, request.link, "aerodaas mission upload", _upload)
@@ -210,10 +230,8 @@ def _upload(request: Upload, name: str, opened: list) -> None:
         items, changes = cap_speeds(items, request.max_speed_mps, _cruise_speed(backend))
         for c in changes:
             print(f"{name}: {c}", flush=True)
-    sent = backend.mission.upload(items)
-    print(f"{name}: {len(sent)} items from {str(path)!r} uploaded to the {backend.link.autopilot} vehicle on "
-          f"{request.link.connection}", flush=True)
-    _check_read_back(backend, sent, name)
+    sent, stored = _upload_and_read_back(backend, items, name, repr(str(path)), request.link.connection)
+    _check_read_back(sent, stored, name)
     if request.start:
         backend.actions.arm()
         backend.mission.start()
