@@ -76,13 +76,18 @@ def test_edge_host_runs_on_the_edge_node_and_cloud_executors_on_cloud_nodes(clus
             assert nodes[info["node_id"]]["tier"] == "cloud" and info["labels"]["tier"] == "cloud"
             assert info["node_id"] in {n.node_id for n in cluster.cloud_nodes}
         # and work flows edge -> cloud -> edge through them
-        w = Workload.from_file(WORKLOAD, "LIGHT")
+        # deadlines of a minute: the cloud's admission re-check (wall clock) refused one of the two tasks on a
+        # loaded machine; this test is about placement and the round trip, not about meeting deadlines
+        data = json.loads(WORKLOAD.read_text())
+        data["loads"]["LIGHT"] = {m: 60_000.0 for m in data["loads"]["LIGHT"]}
+        w = Workload.from_dict(data, "LIGHT")
         ray.get(host.configure.remote(scheduler="CLOUD", workload=w, edge_ids=["e0"], cloud_executors=cloud,
                                       start_epoch=time.time() + 5.0, cloud_jitter="none"))  # lead: a loaded host
         out = ray.get(host.run_trace.remote([(0.0, "e0", "d0", "HV"), (0.0, "e0", "d0", "MD")], 5.0))
         (rep,) = out["edges"]
-        # both ran in the cloud and came back (on time or not: the deadlines are wall clock, the machine may be loaded)
-        assert rep["states"]["done_on_time"] + rep["states"]["done_late"] == 2 and rep["tiers"] == {"cloud": 2}
+        # both ran in the cloud and came back
+        assert rep["states"]["done_on_time"] + rep["states"]["done_late"] == 2 and rep["tiers"] == {"cloud": 2}, \
+            (rep["states"], rep["tiers"], out["cloud"])
     finally:
         for a in (host, *cloud):
             ray.kill(a)
