@@ -19,7 +19,7 @@ import concurrent.futures
 import threading
 import time
 from collections import defaultdict
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 from aerodaas.schedulers.dispatch.banks import AnalyticsBank, DetectorBank
 from aerodaas.schedulers.dispatch.payload import frame_from_payload
@@ -69,6 +69,7 @@ class CloudExecutor:
         if self._pool is not None:
             self._prepare_threads(int(threads))
         self._ready: dict[str, list[dict]] = defaultdict(list)
+        self._unacked: dict[str, dict[int, dict]] = defaultdict(dict)  # client -> key -> reply handed out
         self._events: dict[str, asyncio.Event] = {}
         self._handles: dict[str, set] = defaultdict(set)
         self.executed = 0
@@ -116,25 +117,38 @@ class CloudExecutor:
             self._arrive(client, req, loop, wall, lt)
         return len(reqs)
 
-    async def collect(self, client: str, max_wait_s: float = 5.0) -> list[dict]:
+    async def collect(self, client: str, max_wait_s: float = 5.0,
+                      ack: Sequence[int] | None = None) -> list[dict]:
         """Long poll: every reply ready for ``client``, as soon as there is at least one (or ``[]`` after
-        ``max_wait_s`` seconds)."""
-        ev = self._event(client)
-        if not self._ready[client]:
+        ``max_wait_s`` seconds). ``ack``: the keys (``k``) of the replies the client received from its previous
+        call. With it, a reply stays with the executor until acknowledged and every call returns all unacknowledged
+        ones, so the answer of a call lost on the way back (Ray's ``ActorUnavailableError``: "the task may or may
+        not have been executed") comes again with the next call; the client ignores a key it already has. Without
+        it (None), each reply is handed out once."""
+        unacked = self._unacked[client]
+        for k in ack or ():
+            unacked.pop(k, None)
+        if not self._ready[client] and not (ack is not None and unacked):
+            ev = self._event(client)
             ev.clear()
             try:
                 await asyncio.wait_for(ev.wait(), max_wait_s)
             except asyncio.TimeoutError:
                 return []
         out, self._ready[client] = self._ready[client], []
-        return out
+        if ack is None:
+            return out
+        for r in out:
+            unacked[r["k"]] = r
+        return list(unacked.values())
 
     async def reset(self, client: str | None = None) -> None:
         """Forget ``client``'s (or every client's) pending work and replies."""
-        for c in ([client] if client is not None else list(self._handles)):
+        for c in ([client] if client is not None else {*self._handles, *self._ready, *self._unacked}):
             for h in self._handles.pop(c, ()):
                 h.cancel()
             self._ready.pop(c, None)
+            self._unacked.pop(c, None)
 
     async def stats(self) -> dict:
         return {"name": self.name, "executed": self.executed, "refused": self.refused}

@@ -8,7 +8,10 @@ gave a p99 completion error of ~200 ms and 800/s collapsed (> 1 s). The pool the
 created in one loop iteration for one executor go in one ``submit`` call, and each executor keeps one long-poll
 ``collect`` call per client outstanding, which returns every completion ready at that moment (so the number of
 calls adapts to the load, and a completion waits at most one call round trip, a few ms). The executor's death
-surfaces on that outstanding call at once (``RayActorError`` / ``ActorDiedError``).
+surfaces on that outstanding call at once (``ActorDiedError``). Each ``collect`` acknowledges the replies of the
+previous one and the executor keeps a reply until acknowledged, so a call whose answer is lost on the way
+(``ActorUnavailableError``: a live actor Ray could not reach for a moment) is simply repeated and loses nothing;
+an executor unavailable for ``lost_after_ms`` counts as dead.
 
 Each Ray hop can be delayed by CPU contention (tens of ms on a busy 2-core machine), while the edge's holds are
 timers in one process and stay within a few ms. So in emulated mode the executor holds the task on the intended
@@ -53,6 +56,14 @@ from aerodaas.schedulers.dispatch.stats import Samples
 __all__ = ["CloudClient", "CloudPool"]
 
 log = logging.getLogger(__name__)
+
+
+def _temporarily_unavailable(e: BaseException) -> bool:
+    """Whether ``e`` is Ray's ``ActorUnavailableError`` (the actor may be reachable again later; Ray's
+    ``ray.exceptions``), as opposed to its death (``ActorDiedError``) or any other error."""
+    from ray.exceptions import ActorUnavailableError  # lazy: heavy ray; only on an error
+
+    return isinstance(e, ActorUnavailableError)
 
 
 class CloudClient(Protocol):
@@ -315,14 +326,32 @@ class CloudPool:
 
     # ---- replies
     async def _collector(self, i: int) -> None:
+        """Executor ``i``'s long poll. Each call acknowledges the replies of the previous one (the executor keeps a
+        reply until then: an answer lost on the way comes again). A call failing with Ray's
+        ``ActorUnavailableError`` (the actor may come back: a broken connection, an unresponsive process) is
+        repeated every 0.2 s; the executor counts as dead after ``lost_after_ms`` of that, or at once on any other
+        error (``ActorDiedError``)."""
+        ack: list[int] = []
+        unavailable_since: float | None = None
         while self.alive[i]:
             try:
-                replies = await self._call(i, "collect", self.client)
+                replies = await self._call(i, "collect", self.client, 5.0, ack)
             except asyncio.CancelledError:
                 raise
             except Exception as e:
+                now = time.monotonic()
+                if _temporarily_unavailable(e) and (unavailable_since is None
+                                                    or now - unavailable_since < self.lost_after_ms / 1000.0):
+                    if unavailable_since is None:
+                        unavailable_since = now
+                        log.warning("cloud executor %s unavailable, polling it again: %s", self.name_of(i),
+                                    str(e).splitlines()[0] if str(e) else type(e).__name__)
+                    await asyncio.sleep(0.2)
+                    continue
                 self._executor_died(i, e)
                 return
+            unavailable_since = None
+            ack = [r["k"] for r in replies]
             for r in replies:
                 self._on_reply(i, r)
 
@@ -399,8 +428,8 @@ class CloudPool:
             if outcome in ("retried", "failed"):
                 ev[outcome] += 1
         self.events.append(ev)
-        log.warning("cloud executor %s on node %s died at %.1f s: %d in flight (%d retried, %d failed)",
-                    ev["name"], node, ev["at_s"], ev["in_flight"], ev["retried"], ev["failed"])
+        log.warning("cloud executor %s on node %s died at %.1f s: %d in flight (%d retried, %d failed): %s",
+                    ev["name"], node, ev["at_s"], ev["in_flight"], ev["retried"], ev["failed"], ev["error"])
 
     async def _watchdog(self) -> None:
         while True:

@@ -297,7 +297,7 @@ class DyingExecutor(CloudExecutor):
 
     dead = False
 
-    async def collect(self, client, max_wait_s=5.0):
+    async def collect(self, client, max_wait_s=5.0, ack=None):
         while not self.dead:
             await asyncio.sleep(0.01)
         raise RuntimeError("node lost")
@@ -342,6 +342,78 @@ def test_cloud_loss_in_process_fails_in_flight_tasks_and_tells_the_policy():
     (ev,) = rep["losses"]
     assert late.arrival_ms / 1000.0 > ev["at_s"]
     assert ev["in_flight"] == 2 and ev["failed"] == 2 and ev["retried"] == 0 and "node lost" in ev["error"]
+
+
+class FlakyExecutor(CloudExecutor):
+    """An in-process cloud executor whose first ``unavailable`` answers carrying replies are lost on the way back:
+    the call raises Ray's ``ActorUnavailableError`` after the executor handed the replies out, as a call to a live
+    actor over a broken connection does ("the task may or may not have been executed")."""
+
+    unavailable = 1
+
+    async def collect(self, client, max_wait_s=5.0, ack=None):
+        from ray.exceptions import ActorUnavailableError
+
+        out = await super().collect(client, max_wait_s, ack)
+        if out and self.unavailable > 0:
+            self.unavailable -= 1
+            raise ActorUnavailableError("connection reset", None)
+        return out
+
+
+@pytest.mark.parametrize("lost_answers", [1, 3])
+def test_an_executor_briefly_unavailable_loses_no_reply_and_stays(lost_answers):
+    """The answers of ``collect`` calls lost on the way back: the executor keeps its replies until the pool
+    acknowledges them, so both tasks come back DONE from the cloud, nothing counts as lost and the executor stays
+    in the pool."""
+    w = workload("LIGHT")
+
+    async def run():
+        ex = FlakyExecutor("c0")
+        ex.unavailable = lost_answers
+        pool = CloudPool([ex], jitter=Jitter("none"))
+        d = AnalyticsDispatcher(make_analytics_scheduler("CLOUD", w), EmulatedEdgeExecutor(), pool)
+        await d.start()
+        d.submit("d0", "HV")
+        d.submit("d0", "MD")
+        r = await d.finish(5.0)
+        rep = pool.report()
+        await pool.close()
+        return d, r, rep, ex
+
+    d, r, rep, ex = asyncio.run(run())
+    check_accounting(d, r)
+    assert ex.unavailable == 0  # the answers were lost
+    # done (on time or late: each lost answer costs a 0.2 s pause), in the cloud
+    assert [(t.state in (TaskState.DONE_ON_TIME, TaskState.DONE_LATE), t.tier) for t in d.tasks()] == [(True, "cloud")] * 2
+    assert rep["losses"] == [] and [e["alive"] for e in rep["executors"]] == [True] and rep["in_flight"] == 0
+
+
+def test_the_executor_hands_a_reply_out_again_until_acknowledged():
+    """``collect`` with ``ack``: a reply not acknowledged comes again with the next call, an acknowledged one never;
+    without ``ack`` each reply is handed out once."""
+    async def run():
+        ex = CloudExecutor("c0")
+        now = time.time()
+        req = {"model": "HV", "sent": now, "up_ms": 0.0, "down_ms": 0.0, "exec_ms": 1.0, "admit_by": None,
+               "jpeg": None, "meta": None, "lead_ms": 0.0}
+        await ex.submit("a", [{**req, "k": 1}, {**req, "k": 2}])
+        first = await ex.collect("a", 2.0, [])
+        again = await ex.collect("a", 0.05, [])  # the first answer was "lost": nothing acknowledged
+        await ex.submit("a", [{**req, "k": 3}])
+        await asyncio.sleep(0.05)
+        later = await ex.collect("a", 2.0, [r["k"] for r in again])
+        done = await ex.collect("a", 0.05, [r["k"] for r in later])
+        await ex.submit("b", [{**req, "k": 7}])
+        once = await ex.collect("b", 2.0)
+        none = await ex.collect("b", 0.05)
+        return first, again, later, done, once, none
+
+    first, again, later, done, once, none = asyncio.run(run())
+    keys = lambda rs: sorted(r["k"] for r in rs)  # noqa: E731
+    assert keys(first) == keys(again) == [1, 2]
+    assert keys(later) == [3] and done == []
+    assert keys(once) == [7] and none == []
 
 
 def ev_time(pool_report: dict) -> float:
