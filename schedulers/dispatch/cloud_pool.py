@@ -11,7 +11,9 @@ calls adapts to the load, and a completion waits at most one call round trip, a 
 surfaces on that outstanding call at once (``ActorDiedError``). Each ``collect`` acknowledges the replies of the
 previous one and the executor keeps a reply until acknowledged, so a call whose answer is lost on the way
 (``ActorUnavailableError``: a live actor Ray could not reach for a moment) is simply repeated and loses nothing;
-an executor unavailable for ``lost_after_ms`` counts as dead.
+new tasks go to the other executors meanwhile, and one unreachable for ``unavailable_after_ms`` (3 s) counts as dead
+(a call to an actor on a node that just died raises the same error until Ray learns of the death: measured beside
+two CPU burners, ten seconds and more).
 
 Each Ray hop can be delayed by CPU contention (tens of ms on a busy 2-core machine), while the edge's holds are
 timers in one process and stay within a few ms. So in emulated mode the executor holds the task on the intended
@@ -108,19 +110,26 @@ class CloudPool:
     executor dies (if the policy still admits it). ``lost_after_ms``: a task with no reply this long after its
     deadline ends FAILED. ``reply_lead_ms`` (emulated mode): the executor sends a reply up to this long before it
     is due and the pool releases it exactly when due (unless the executor died meanwhile), so Ray's reply hop does
-    not add to the emulated round trip; 0 makes the reply's arrival time the completion time. See the module
-    docstring for the transport and the loss handling.
+    not add to the emulated round trip; 0 makes the reply's arrival time the completion time.
+    ``unavailable_after_ms``: an executor Ray cannot reach (``ActorUnavailableError``) this long in a row counts as
+    dead; meanwhile new tasks go to the others when there are any. See the module docstring for the transport and
+    the loss handling.
     """
 
     def __init__(self, executors: Sequence[Any], *, mode: str = "emulated", network: NetworkModel | None = None,
                  jitter: Jitter = Jitter("lognormal", 0.1), seed: int = 0, retry: bool = True,
                  lost_after_ms: float = 10_000.0, jpeg_quality: int = 90, client_id: str | None = None,
-                 reply_lead_ms: float = 100.0) -> None:
+                 reply_lead_ms: float = 100.0, unavailable_after_ms: float = 3_000.0) -> None:
         if mode not in ("emulated", "real"):
             raise ValueError(f"mode must be 'emulated' or 'real', got {mode!r}")
         if not (reply_lead_ms >= 0 and math.isfinite(reply_lead_ms)):
             raise ValueError(f"reply_lead_ms must be a finite number >= 0, got {reply_lead_ms!r}")
         self.reply_lead_ms = float(reply_lead_ms)
+        if not (unavailable_after_ms >= 0 and math.isfinite(unavailable_after_ms)):
+            raise ValueError(f"unavailable_after_ms must be a finite number >= 0, got {unavailable_after_ms!r}")
+        self.unavailable_after_ms = float(unavailable_after_ms)
+        #: executor -> time.monotonic() of its first failed poll in a row (``ActorUnavailableError``)
+        self._unavailable_since: dict[int, float] = {}
         if not executors:
             raise ValueError("a CloudPool needs at least one cloud executor")
         self.executors = list(executors)
@@ -245,10 +254,13 @@ class CloudPool:
 
     # ---- sending
     def _pick(self) -> int | None:
+        """Round robin over the live executors, those Ray can reach first (an unreachable one only when it is all
+        there is: its tasks then wait for it to answer or be counted dead)."""
         alive = [i for i, a in enumerate(self.alive) if a]
         if not alive:
             return None
-        return alive[next(self._rr) % len(alive)]
+        reachable = [i for i in alive if i not in self._unavailable_since] or alive
+        return reachable[next(self._rr) % len(reachable)]
 
     def send(self, dispatcher: CloudClient, task: AnalyticsTask, admit_by_ms: float, now_ms: float) -> bool:
         """Queue ``task`` for the cloud (on the loop). Returns False when no executor is alive."""
@@ -328,11 +340,11 @@ class CloudPool:
     async def _collector(self, i: int) -> None:
         """Executor ``i``'s long poll. Each call acknowledges the replies of the previous one (the executor keeps a
         reply until then: an answer lost on the way comes again). A call failing with Ray's
-        ``ActorUnavailableError`` (the actor may come back: a broken connection, an unresponsive process) is
-        repeated every 0.2 s; the executor counts as dead after ``lost_after_ms`` of that, or at once on any other
-        error (``ActorDiedError``)."""
+        ``ActorUnavailableError`` (the actor may come back: a broken connection, an unresponsive process; it is also
+        what a call to an actor on a node that just died raises until Ray learns of the death) is repeated every
+        0.2 s; the executor counts as dead after ``unavailable_after_ms`` of that, or at once on any other error
+        (``ActorDiedError``)."""
         ack: list[int] = []
-        unavailable_since: float | None = None
         while self.alive[i]:
             try:
                 replies = await self._call(i, "collect", self.client, 5.0, ack)
@@ -340,17 +352,19 @@ class CloudPool:
                 raise
             except Exception as e:
                 now = time.monotonic()
-                if _temporarily_unavailable(e) and (unavailable_since is None
-                                                    or now - unavailable_since < self.lost_after_ms / 1000.0):
-                    if unavailable_since is None:
-                        unavailable_since = now
+                since = self._unavailable_since.get(i)
+                if _temporarily_unavailable(e) and (since is None
+                                                    or now - since < self.unavailable_after_ms / 1000.0):
+                    if since is None:
+                        self._unavailable_since[i] = now
                         log.warning("cloud executor %s unavailable, polling it again: %s", self.name_of(i),
                                     str(e).splitlines()[0] if str(e) else type(e).__name__)
                     await asyncio.sleep(0.2)
                     continue
+                self._unavailable_since.pop(i, None)
                 self._executor_died(i, e)
                 return
-            unavailable_since = None
+            self._unavailable_since.pop(i, None)
             ack = [r["k"] for r in replies]
             for r in replies:
                 self._on_reply(i, r)
@@ -441,7 +455,8 @@ class CloudPool:
 
     def report(self) -> dict:
         return {"executors": [{"name": self.name_of(i), "node_id": self.infos[i].get("node_id"),
-                               "labels": self.infos[i].get("labels", {}), "alive": self.alive[i]}
+                               "labels": self.infos[i].get("labels", {}), "alive": self.alive[i],
+                               "reachable": self.alive[i] and i not in self._unavailable_since}
                               for i in range(len(self.executors))],
                 "losses": list(self.events), "sent": self.sent, "retried": self.retried,
                 "in_flight": len(self._inflight), "mode": self.mode, "network": self.network.describe(),

@@ -8,6 +8,7 @@ import threading
 import time
 
 import pytest
+from ray.exceptions import ActorUnavailableError  # imported here: the first import takes ~0.5 s, not on a test's loop
 
 from aerodaas.actors.cloud.executor import CloudExecutor
 from aerodaas.schedulers.dispatch.clock import Clock
@@ -352,8 +353,6 @@ class FlakyExecutor(CloudExecutor):
     unavailable = 1
 
     async def collect(self, client, max_wait_s=5.0, ack=None):
-        from ray.exceptions import ActorUnavailableError
-
         out = await super().collect(client, max_wait_s, ack)
         if out and self.unavailable > 0:
             self.unavailable -= 1
@@ -387,6 +386,50 @@ def test_an_executor_briefly_unavailable_loses_no_reply_and_stays(lost_answers):
     # done (on time or late: each lost answer costs a 0.2 s pause), in the cloud
     assert [(t.state in (TaskState.DONE_ON_TIME, TaskState.DONE_LATE), t.tier) for t in d.tasks()] == [(True, "cloud")] * 2
     assert rep["losses"] == [] and [e["alive"] for e in rep["executors"]] == [True] and rep["in_flight"] == 0
+
+
+class UnreachableExecutor(CloudExecutor):
+    """An in-process cloud executor on a node that died: requests vanish, and every ``collect`` raises Ray's
+    ``ActorUnavailableError``, as calls to an actor on a lost node do until Ray learns of the death."""
+
+    async def submit(self, client, reqs):
+        return len(reqs)
+
+    async def collect(self, client, max_wait_s=5.0, ack=None):
+        await asyncio.sleep(0.02)
+        raise ActorUnavailableError("failed to connect: connection refused", None)
+
+
+def test_an_executor_unreachable_for_unavailable_after_ms_counts_as_dead_and_gets_no_new_task_meanwhile():
+    """c0 is unreachable from the start: the task it got is retried on c1 once c0 counts as dead (after
+    ``unavailable_after_ms``), and the tasks submitted while it was only unreachable went to c1 straight away."""
+    w = workload("LIGHT")
+
+    async def run():
+        c0, c1 = UnreachableExecutor("c0"), CloudExecutor("c1")
+        pool = CloudPool([c0, c1], jitter=Jitter("none"), unavailable_after_ms=2000.0)
+        d = AnalyticsDispatcher(make_analytics_scheduler("CLOUD", w), EmulatedEdgeExecutor(), pool)
+        await d.start()
+        d.submit("d0", "HV")
+        d.submit("d0", "HV")  # round robin: one each
+        while pool.report()["executors"][0]["reachable"]:  # until c0's first poll has failed
+            await asyncio.sleep(0.01)
+        assert pool.report()["executors"][0]["alive"]
+        for _ in range(4):
+            d.submit("d1", "HV")
+        r = await d.finish(8.0)
+        rep = pool.report()
+        await pool.close()
+        st = await c1.stats()
+        return d, r, rep, st["executed"] + st["refused"]  # refused: its wall-clock re-check, on a loaded machine
+
+    d, r, rep, reached_c1 = asyncio.run(run())
+    check_accounting(d, r)
+    (ev,) = rep["losses"]
+    assert ev["name"] == "c0" and "ActorUnavailableError" in ev["error"] and ev["at_s"] >= 2.0, ev
+    assert ev["in_flight"] == 1 and ev["retried"] + ev["failed"] == 1, ev  # only the task sent before it was seen
+    assert reached_c1 == 5 + ev["retried"], [(t.state.value, t.tier, t.reason) for t in d.tasks()]
+    assert all(t.tier == "cloud" for t in d.tasks())
 
 
 def test_the_executor_hands_a_reply_out_again_until_acknowledged():
