@@ -16,9 +16,8 @@ from aerodaas.schedulers.dispatch.dispatcher import AnalyticsDispatcher
 from aerodaas.schedulers.dispatch.edge_executors import EmulatedEdgeExecutor
 from aerodaas.schedulers.dispatch.emulation import Jitter
 
-from tests.cluster.test_edgecloud import (
-    DyingExecutor, JustInTimeCloud, SendAllToCloud, check_accounting, drive, workload,
-)
+from tests.cluster.test_cloud_pool_losses import DyingExecutor
+from tests.cluster.test_edgecloud import JustInTimeCloud, SendAllToCloud, check_accounting, drive, workload
 from tests.conftest import needs_workload
 
 pytestmark = needs_workload
