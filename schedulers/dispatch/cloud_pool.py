@@ -454,6 +454,11 @@ class CloudPool:
                                            "deadline")
 
     def report(self) -> dict:
+        """The pool's state as JSON-ready values: ``executors`` (per executor ``name``, ``node_id``, ``labels``,
+        ``alive``: not counted dead, ``reachable``: alive and its last poll answered), ``losses`` (one event per
+        executor death: ``executor``, ``name``, ``node_id``, ``at_s`` on the run's clock, ``error``, ``in_flight``,
+        ``retried``, ``failed``), ``sent``/``retried``/``in_flight`` task counts, ``mode``, ``network``, ``jitter``,
+        ``reply_lead_ms`` and ``reply_margin_ms`` (how early replies arrived, ms)."""
         return {"executors": [{"name": self.name_of(i), "node_id": self.infos[i].get("node_id"),
                                "labels": self.infos[i].get("labels", {}), "alive": self.alive[i],
                                "reachable": self.alive[i] and i not in self._unavailable_since}
