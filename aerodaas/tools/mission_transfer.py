@@ -15,7 +15,7 @@ from aerodaas.backends.mavlink.transfer import FENCE, RALLY
 from aerodaas.backends.mavlink.signing import KeyFileError
 from aerodaas.config import MavlinkConfig, RobotConfig
 from aerodaas.missionfile import MissionFileError, load_mission, plan_to_flight, save_plan, save_wpl
-from aerodaas.missionfile.upload import cap_speeds, check_relative_altitudes, mission_differences, mission_frames
+from aerodaas.missionfile.upload import cap_speeds, check_relative_altitudes, mission_frames
 from aerodaas.model.types import GeoPoint
 
 __all__ = ["Download", "Upload", "VehicleLink", "download", "upload"]
@@ -121,41 +121,24 @@ def _cruise_speed(backend) -> float | None:
     return got[name] * unit if name in got else None
 
 
-def _upload_and_read_back(backend, items, name: str, where: str, connection: str) -> tuple[list, list]:
-    """Upload ``items`` and download what the vehicle then holds; returns ``(sent, stored)``. A vehicle that holds
-    another number of items than it has just accepted replaced our mission with another one: it is uploaded once
-    more, said on stderr. PX4 can do that right after an upload (``src/modules/mavlink/mavlink_mission.cpp``,
-    ``MavlinkMissionManager::check_active_mission``: a mission state published on its ``mission`` topic with
-    another mission id, such as one its navigator published meanwhile, replaces the count just stored)."""
-    def once() -> tuple[list, list]:
-        sent = backend.mission.upload(items)
-        print(f"{name}: {len(sent)} items from {where} uploaded to the {backend.link.autopilot} vehicle on "
-              f"{connection}", flush=True)
-        return sent, backend.mission.download().items
-
-    sent, stored = once()
-    if len(stored) != len(sent):
-        print(f"{name}: note: right after accepting the {len(sent)} items the vehicle holds {len(stored)}: "
-              f"another mission replaced it; uploading it once more", file=sys.stderr, flush=True)
-        sent, stored = once()
-    return sent, stored
-
-
-def _check_read_back(sent, stored, name: str) -> None:
-    """Compare the vehicle's mission ``stored`` with ``sent`` (:func:`~aerodaas.missionfile.upload.
-    mission_differences`): prints what it stored differently; raises BackendError when that changes the flight
-    (command, the frame, position or altitude of a command with a position, a hold time or speed, the number of
-    items)."""
-    diffs = mission_differences(sent, stored)
-    flight = [d for d in diffs if d.flight]
-    for d in diffs:
-        if not d.flight:
-            print(f"{name}: note: the vehicle stored {d} (a field it does not keep)", file=sys.stderr, flush=True)
-    if flight:
-        raise BackendError("the mission read back differs from the one sent: "
-                           + "; ".join(str(d) for d in flight[:5]) + "; not started")
-    print(f"{name}: read back: the vehicle holds the {len(stored)} items as sent"
-          + (f", but for {len(diffs)} field(s) it does not keep (above)" if diffs else ""), flush=True)
+def _report_upload(backend, sent, name: str, where: str, connection: str) -> None:
+    """Say what the backend's upload did (its events, :meth:`~aerodaas.backends.mavlink.mission.AutopilotMission.
+    upload`): the items sent, a mission the vehicle replaced right after accepting it (uploaded once more, on
+    stderr), and each field the vehicle's read-back holds differently without changing the flight."""
+    print(f"{name}: {len(sent)} items from {where} uploaded to the {backend.link.autopilot} vehicle on "
+          f"{connection}", flush=True)
+    not_kept: list[str] = []
+    for ev in backend.drain_events():
+        if ev["event"] == "mission_replaced":
+            print(f"{name}: note: right after accepting the {ev['count']} items the vehicle held {ev['stored']} "
+                  f"({'; '.join(ev['differences'])}): another mission replaced it; uploaded it once more",
+                  file=sys.stderr, flush=True)
+        elif ev["event"] == "mission_uploaded":
+            not_kept = ev["fields_not_kept"]
+    for d in not_kept:
+        print(f"{name}: note: the vehicle stored {d} (a field it does not keep)", file=sys.stderr, flush=True)
+    print(f"{name}: read back: the vehicle holds the {len(sent)} items as sent"
+          + (f", but for {len(not_kept)} field(s) it does not keep (above)" if not_kept else ""), flush=True)
 
 
 def upload(request: Upload) -> int:
@@ -169,9 +152,10 @@ def upload(request: Upload) -> int:
     its rally points (MAV_MISSION_TYPE_RALLY), then the mission as written: its speeds unless ``--max-speed`` caps
     them (each item changed is printed, :func:`~aerodaas.missionfile.upload.cap_speeds`), each command without a
     position in ``MAV_FRAME_MISSION`` (printed, :func:`~aerodaas.missionfile.upload.mission_frames`); no other
-    vehicle parameter is changed. The mission is then read back and compared as each autopilot stores it
-    (:func:`~aerodaas.missionfile.upload.mission_differences`; a different flight: exit 2, not started; a vehicle
-    holding another number of items than it has just accepted gets it once more, :func:`_upload_and_read_back`).
+    vehicle parameter is changed. The backend's upload reads the mission back and compares it as each autopilot
+    stores it (:meth:`~aerodaas.backends.mavlink.mission.AutopilotMission.upload`: a vehicle holding another flight
+    than it has just accepted gets it once more; still another: exit 2, not started); each field stored
+    differently without changing the flight is printed (:func:`_report_upload`).
     ``--key-file``: the link signed with that key as the backend signs it (``mavlink.signing_key_file``); a key file
     that cannot be used or a vehicle that does not answer signed: exit 2 (as for a refused file or bound, named)."""
     return _transfer(request, request.link, "aerodaas mission upload", _upload)
@@ -230,8 +214,8 @@ def _upload(request: Upload, name: str, opened: list) -> None:
         items, changes = cap_speeds(items, request.max_speed_mps, _cruise_speed(backend))
         for c in changes:
             print(f"{name}: {c}", flush=True)
-    sent, stored = _upload_and_read_back(backend, items, name, repr(str(path)), request.link.connection)
-    _check_read_back(sent, stored, name)
+    sent = backend.mission.upload(items)  # read back and compared by the backend (a different flight raises)
+    _report_upload(backend, sent, name, repr(str(path)), request.link.connection)
     if request.start:
         backend.actions.arm()
         backend.mission.start()

@@ -17,6 +17,23 @@ REFUSED = {"ardupilot": "MAV_RESULT_FAILED", "px4": "MAV_RESULT_TEMPORARILY_REJE
 PREARM_PREFIX = {"ardupilot": "Arm: ", "px4": "Preflight Fail: "}  # a refused arm command, as the firmware says
 
 
+def replace_mission_on_read(emu, times: int) -> list[int]:
+    """Make the emulated vehicle drop its mission (hold none) just before each of the first ``times`` mission
+    downloads, as PX4 does when a mission state published meanwhile replaces the one just uploaded. Returns the
+    list of mission lengths it dropped."""
+    handler = emu.handlers["MISSION_REQUEST_LIST"]
+    dropped: list[int] = []
+
+    def replaced(link, msg):
+        if getattr(msg, "mission_type", 0) == 0 and len(dropped) < times:
+            with emu._lock:
+                dropped.append(len(emu.missions.mission))
+                emu.missions.mission = []
+        handler(link, msg)
+
+    emu.handlers["MISSION_REQUEST_LIST"] = replaced
+    return dropped
+
 
 def run_until(backend, cond, timeout_s: float = 15.0, every=None) -> bool:
     """Drive the backend like the runtime does (step() at 20 Hz wall) until ``cond()``; ``every()`` each tick."""

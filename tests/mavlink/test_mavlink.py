@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as M
 
-from aerodaas.backends import CommandRefused, LinkLost
+from aerodaas.backends import BackendError, CommandRefused, LinkLost
 from aerodaas.backends.mavlink import CommandNotAcknowledged, MavlinkBackend
 from aerodaas.backends.mavlink.params import px4_speed_limit
 from aerodaas.config import MavlinkConfig, RobotConfig
@@ -28,6 +28,7 @@ from tests.mavlink.emulated import (
     RTL_PARAMS,
     VEHICLE_HOME,
     dist,
+    replace_mission_on_read,
     position_ready,
     run_until,
 )
@@ -208,6 +209,30 @@ def test_mission_round_trip_and_auto_flight(fly, autopilot):
         assert min(math.hypot(p[0] - wp.x, p[1] - wp.y) + max(0.0, abs(p[2] - wp.z) - emu.state.home_alt_drift_m)
                    for p in track) < 2.0, wp.id
     assert max(p[2] for p in track) > 5.5 and dist(b.state().position[:2], (0, 10)) < 1.0  # landed at the last waypoint
+
+
+@pytest.mark.parametrize("replaced", [1, 2])
+def test_a_mission_the_vehicle_replaces_right_after_the_upload_is_sent_once_more_or_refused(fly, replaced):
+    """PX4 can replace a mission it has just accepted (a mission state published meanwhile): the backend's
+    read-back finds another flight and uploads once more (event ``mission_replaced``); replaced again, the upload
+    raises naming what the vehicle holds, and the vehicle holds no mission to start."""
+    emu, b = fly("px4")
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    wps = [Waypoint(id=f"wp{i}", x=x, y=0.0, z=5.0) for i, x in enumerate((8.0, 16.0))]
+    dropped = replace_mission_on_read(emu, replaced)
+    if replaced == 2:
+        with pytest.raises(BackendError, match="mission: count 4 sent, 0 stored; not started"):
+            b.mission.upload(wps, takeoff_altitude=5.0, final_action="land")
+        assert dropped == [4, 4] and emu.snapshot()["mission_len"] == 0
+        assert not [e for e in b.drain_events() if e["event"] == "mission_uploaded"]
+        return
+    sent = b.mission.upload(wps, takeoff_altitude=5.0, final_action="land")
+    assert dropped == [4] and [it.command for it in sent] == [22, 16, 16, 21]
+    ev = b.drain_events()
+    assert [(e["count"], e["stored"], e["differences"]) for e in ev if e["event"] == "mission_replaced"] == \
+        [(4, 0, ["mission: count 4 sent, 0 stored"])]
+    assert [e["count"] for e in ev if e["event"] == "mission_uploaded"] == [4]
+    assert b.mission.download().items == sent and emu.snapshot()["mission_len"] == 4
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)

@@ -11,6 +11,7 @@ from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.missionfile import load_mission
 from aerodaas.model.types import GeoPoint
 from tests.conftest import DATA_DIR
+from tests.mavlink.emulated import replace_mission_on_read
 
 SQUARE = DATA_DIR / "missions" / "qgc_test_simple_square.plan"  # take-off + 4-waypoint square
 
@@ -193,36 +194,18 @@ def test_a_mission_the_vehicle_stores_differently_is_not_started(vehicle, tmp_pa
     assert "not started" in err and not emu.snapshot()["armed"]
 
 
-def _replace_mission_on_read(emu, times: int) -> list[int]:
-    """Make the emulated vehicle drop its mission (hold none) just before each of the first ``times`` mission
-    downloads, as PX4 does when a mission state published meanwhile replaces the one just uploaded. Returns the
-    list of mission lengths it dropped."""
-    handler = emu.handlers["MISSION_REQUEST_LIST"]
-    dropped: list[int] = []
-
-    def replaced(link, msg):
-        if getattr(msg, "mission_type", 0) == 0 and len(dropped) < times:
-            with emu._lock:
-                dropped.append(len(emu.missions.mission))
-                emu.missions.mission = []
-        handler(link, msg)
-
-    emu.handlers["MISSION_REQUEST_LIST"] = replaced
-    return dropped
-
-
 def test_a_mission_the_vehicle_replaces_right_after_the_upload_goes_up_once_more(vehicle, tmp_path, capsys):
     """PX4 can replace a mission it has just accepted (a mission state published meanwhile): the read-back holds 0
     items. The upload is sent once more, said, and the vehicle then holds the mission as sent."""
     emu, address = vehicle("px4")
-    dropped = _replace_mission_on_read(emu, 1)
+    dropped = replace_mission_on_read(emu, 1)
     path = _wpl(tmp_path / "speedy.waypoints", SPEEDY)
     assert main(["mission", "upload", str(path), "--connection", address]) == 0
     out, err = capsys.readouterr()
     assert dropped == [5], dropped
-    assert "right after accepting the 5 items the vehicle holds 0: another mission replaced it; uploading it once " \
-           "more" in err, err
-    assert out.count("5 items from") == 2 and "read back: the vehicle holds the 5 items as sent" in out, out
+    assert "right after accepting the 5 items the vehicle held 0 (mission: count 5 sent, 0 stored): another " \
+           "mission replaced it; uploaded it once more" in err, err
+    assert out.count("5 items from") == 1 and "read back: the vehicle holds the 5 items as sent" in out, out
     with emu._lock:
         assert [it.command for it in emu.missions.mission] == [22, 16, 178, 16, 21]
 
@@ -230,7 +213,7 @@ def test_a_mission_the_vehicle_replaces_right_after_the_upload_goes_up_once_more
 def test_a_mission_the_vehicle_replaces_twice_is_not_started(vehicle, tmp_path, capsys):
     """Replaced again after the second upload: exit 2 naming the count the vehicle holds, and --start does not arm."""
     emu, address = vehicle("px4")
-    dropped = _replace_mission_on_read(emu, 2)
+    dropped = replace_mission_on_read(emu, 2)
     path = _wpl(tmp_path / "speedy.waypoints", SPEEDY)
     assert main(["mission", "upload", str(path), "--connection", address, "--start"]) == 2
     err = capsys.readouterr().err

@@ -7,10 +7,10 @@ import math
 import threading
 from typing import Any, Callable, Literal
 
-
-
 from aerodaas.model.geo import geodetic_to_enu
+from aerodaas.backends.base import BackendError
 from aerodaas.missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
+from aerodaas.missionfile.upload import mission_differences
 from aerodaas.model.types import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.backends.mavlink._common import M, _f32, _GLOBAL_FRAMES
 from aerodaas.backends.mavlink.action import VehicleAction
@@ -44,6 +44,19 @@ def reports_the_running_mission(mission_state: int, mode: str) -> bool:
     if mission_state:
         return mission_state == M.MISSION_STATE_ACTIVE
     return mode in ("AUTO", "MISSION")
+
+
+def _float_degrees(v: float) -> float:
+    """Degrees as a MISSION_ITEM carries them (float32), on the 1e-7 degree grid of MISSION_ITEM_INT."""
+    return round(_f32(v) * 1e7) / 1e7
+
+
+def _as_float_degrees(item: MissionItem) -> MissionItem:
+    """``item`` with a global position as it reads back in a MISSION_ITEM (:func:`_float_degrees`)."""
+    if item.frame not in _GLOBAL_FRAMES or item.params[4] is None or item.params[5] is None:
+        return item
+    return item.model_copy(update={"params": [*item.params[:4], _float_degrees(item.params[4]),
+                                              _float_degrees(item.params[5]), item.params[6]]})
 
 
 class AutopilotMission:
@@ -135,8 +148,18 @@ class AutopilotMission:
         ``HomePosition``); given mission items (a file) keep their frames and their speeds (DO_CHANGE_SPEED); the
         speeds of items built from waypoints are capped at the robot's limit.
 
+        The accepted mission is then read back (:meth:`download`) and compared with what was sent
+        (:func:`~aerodaas.missionfile.upload.mission_differences`, what each autopilot stores): a vehicle that
+        holds another flight (count, command, position, altitude, hold time, speed) gets the mission once more
+        (event ``mission_replaced``), since PX4 can replace a mission it has just accepted
+        (``src/modules/mavlink/mavlink_mission.cpp``, ``MavlinkMissionManager::check_active_mission``: a mission
+        state published on its ``mission`` topic with another mission id, such as the navigator's own copy,
+        replaces the count just stored). Event ``mission_uploaded``: ``count`` and ``fields_not_kept`` (each field
+        the vehicle stores differently without changing the flight, said as text).
+
         Returns the items as sent (``seq`` from 1; latitude/longitude rounded to 1e-7 degrees, params to float32),
-        which :meth:`download` returns unchanged. Raises CommandRefused (MAV_MISSION_RESULT name) when the
+        which :meth:`download` returns unchanged. Raises BackendError when the read-back of the second upload
+        still differs in the flight (named, "not started"), CommandRefused (MAV_MISSION_RESULT name) when the
         autopilot rejects an item, BackendError after ``command_retries`` timeouts, LinkLost, TypeError/ValueError
         for bad input (nothing is sent then)."""
         items, built = self._mission_items(mission, takeoff_altitude, final_action)
@@ -146,11 +169,25 @@ class AutopilotMission:
             self._actions.pin_altitude_reference()
         wire, sent_items = self._wire_items(items, built, absolute)
         self._link.check_link("mission upload")
-        with self._lock:  # closed before the transfer: the vehicle may announce the new mission with its ACK
-            self._uploaded, self._started, self._live, self._seq = True, False, False, -1
-        self._transfers.upload_mission(wire)
+        for attempt in (1, 2):
+            with self._lock:  # closed before the transfer: the vehicle may announce the new mission with its ACK
+                self._uploaded, self._started, self._live, self._seq = True, False, False, -1
+            self._transfers.upload_mission(wire)
+            stored, floats = self._download_items()
+            # positions read back as float32 degrees (MISSION_ITEM) are compared with the sent ones as float32
+            differences = mission_differences([_as_float_degrees(it) for it in sent_items] if floats else sent_items,
+                                              stored)
+            flight = [d for d in differences if d.flight]
+            if not flight:
+                break
+            if attempt == 1:
+                self._event("mission_replaced", count=len(sent_items), stored=len(stored),
+                            differences=[str(d) for d in flight[:5]])
+        else:
+            raise BackendError("the mission read back differs from the one sent: "
+                               + "; ".join(str(d) for d in flight[:5]) + "; not started")
         self._remember_waypoints(wire)
-        self._event("mission_uploaded", count=len(sent_items))
+        self._event("mission_uploaded", count=len(sent_items), fields_not_kept=[str(d) for d in differences])
         return sent_items
 
     def _wire_items(self, items: list[MissionItem], built: bool,
@@ -222,16 +259,23 @@ class AutopilotMission:
         (ArduPilot's home item at sequence 0 is left out); turn it into waypoints with
         :func:`~aerodaas.missionfile.plan_to_flight`. Raises BackendError / LinkLost, CommandRefused (MISSION_ACK
         with an error)."""
+        return MissionPlan(home=self._telemetry.home, items=self._download_items()[0])
+
+    def _download_items(self) -> tuple[list[MissionItem], bool]:
+        """The mission's items (see :meth:`download`) and whether any position came as float32 degrees
+        (MISSION_ITEM: about 1e-6 degree apart near 50 degrees, not the 1e-7 grid)."""
         self._link.check_link("mission download")
         got = self._transfers.download_messages(0, "mission download")
         items = []
+        floats = False
         first = 1 if self._link.autopilot == "ardupilot" else 0
         for seq in sorted(got):
             if seq < first:
                 continue
             m = got[seq]
             if m.frame in _GLOBAL_FRAMES and m.get_type() == "MISSION_ITEM":  # float degrees (float32 on the wire)
-                x, y = round(m.x * 1e7) / 1e7, round(m.y * 1e7) / 1e7
+                x, y = _float_degrees(m.x), _float_degrees(m.y)
+                floats = True
             elif m.frame in _GLOBAL_FRAMES:
                 x, y = m.x / 1e7, m.y / 1e7
             else:
@@ -239,7 +283,7 @@ class AutopilotMission:
             items.append(MissionItem(seq=seq + 1 - first, command=m.command, frame=m.frame,
                                      params=[_f32(m.param1), _f32(m.param2), _f32(m.param3), _f32(m.param4), x, y,
                                              _f32(m.z)], autocontinue=bool(m.autocontinue)))
-        return MissionPlan(home=self._telemetry.home, items=items)
+        return items, floats
 
     def clear(self) -> None:
         """MISSION_CLEAR_ALL; waits for MISSION_ACK. Raises CommandRefused / BackendError / LinkLost."""
