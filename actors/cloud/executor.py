@@ -18,7 +18,7 @@ import asyncio
 import concurrent.futures
 import threading
 import time
-from collections import defaultdict
+from collections import OrderedDict, defaultdict
 from typing import Any, Mapping, Sequence
 
 from aerodaas.schedulers.dispatch.banks import AnalyticsBank, DetectorBank
@@ -27,6 +27,10 @@ from aerodaas.schedulers.dispatch.payload import frame_from_payload
 from aerodaas.actors.host.remote import LazyActorClass, where
 
 __all__ = ["CloudExecutor", "CloudExecutorActor", "cloud_selector", "start_cloud_executors"]
+
+#: how many of a client's latest request keys an executor remembers, so that a batch sent again runs once (a
+#: client's keys only repeat within the few batches of a Ray call's retry, seconds apart)
+_ACCEPTED_KEPT = 65_536
 
 
 class CloudExecutor:
@@ -70,6 +74,8 @@ class CloudExecutor:
             self._prepare_threads(int(threads))
         self._ready: dict[str, list[dict]] = defaultdict(list)
         self._unacked: dict[str, dict[int, dict]] = defaultdict(dict)  # client -> key -> reply handed out
+        #: client -> the keys of its latest requests (at most _ACCEPTED_KEPT): a request sent again is not run twice
+        self._accepted: dict[str, OrderedDict[int, None]] = defaultdict(OrderedDict)
         self._events: dict[str, asyncio.Event] = {}
         self._handles: dict[str, set] = defaultdict(set)
         self.executed = 0
@@ -110,12 +116,22 @@ class CloudExecutor:
         return {"name": self.name, "mode": self.mode, **where()}
 
     async def submit(self, client: str, reqs: list[dict]) -> int:
-        """Accept a batch of requests from ``client``; returns how many were accepted (all)."""
+        """Accept a batch of requests from ``client``; returns how many were new. A request whose key (``k``) is
+        among the client's latest :data:`_ACCEPTED_KEPT` is ignored: the client sends a batch again when Ray could
+        not tell whether the first call arrived (``ActorUnavailableError``: "may or may not have been executed")."""
         loop = self._loop = asyncio.get_running_loop()
         wall, lt = time.time(), loop.time()
+        accepted = self._accepted[client]
+        new = 0
         for req in reqs:  # arrival: the re-check comes before the emulated uplink (see the module docstring)
+            if req["k"] in accepted:
+                continue
+            accepted[req["k"]] = None
+            if len(accepted) > _ACCEPTED_KEPT:
+                accepted.popitem(last=False)
             self._arrive(client, req, loop, wall, lt)
-        return len(reqs)
+            new += 1
+        return new
 
     async def collect(self, client: str, max_wait_s: float = 5.0,
                       ack: Sequence[int] | None = None) -> list[dict]:
@@ -149,6 +165,7 @@ class CloudExecutor:
                 h.cancel()
             self._ready.pop(c, None)
             self._unacked.pop(c, None)
+            self._accepted.pop(c, None)
 
     async def stats(self) -> dict:
         return {"name": self.name, "executed": self.executed, "refused": self.refused}

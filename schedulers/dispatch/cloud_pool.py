@@ -11,7 +11,7 @@ calls adapts to the load, and a completion waits at most one call round trip, a 
 surfaces on that outstanding call at once (``ActorDiedError``). Each ``collect`` acknowledges the replies of the
 previous one and the executor keeps a reply until acknowledged, so a call whose answer is lost on the way
 (``ActorUnavailableError``: a live actor Ray could not reach for a moment) is simply repeated and loses nothing;
-new tasks go to the other executors meanwhile, and one unreachable for ``unavailable_after_ms`` (3 s) counts as dead
+a ``submit`` call failing so is sent again (the executor runs a request it already has only once); new tasks go to the other executors meanwhile, and one unreachable for ``unavailable_after_ms`` (3 s) counts as dead
 (a call to an actor on a node that just died raises the same error until Ray learns of the death, which can take
 ten seconds and more on a loaded machine).
 
@@ -322,6 +322,9 @@ class CloudPool:
         self._flush_scheduled = False
         boxes, self._outbox = self._outbox, defaultdict(list)
         for i, reqs in boxes.items():
+            # a request whose task went elsewhere meanwhile (its executor died: _executor_died rerouted it) or
+            # ended is not sent here
+            reqs = [r for r in reqs if (f := self._inflight.get(r["k"])) is not None and f.executor == i]
             if not reqs:
                 continue
             if not self.alive[i]:
@@ -329,12 +332,27 @@ class CloudPool:
                     self._reroute_or_fail(r["k"], f"cloud executor {self.name_of(i)} died before the task was sent")
                 continue
             ex = self.executors[i]
-            if self._is_actor(ex):
-                # fire and forget: if the executor is dead, its outstanding collect call fails and every task sent
-                # to it (these included) is retried or failed by _executor_died
-                ex.submit.remote(self.client, reqs)
-            else:
-                self._loop.create_task(ex.submit(self.client, reqs))
+            call = ex.submit.remote(self.client, reqs) if self._is_actor(ex) else ex.submit(self.client, reqs)
+            self._loop.create_task(self._submitted(i, reqs, call))
+
+    async def _submitted(self, i: int, reqs: list[dict], call: Any) -> None:
+        """Wait for executor ``i`` to accept ``reqs`` (``call``: its ``submit`` call, a Ray ObjectRef or a
+        coroutine). A call Ray could not deliver for certain (``ActorUnavailableError``: "may or may not have been
+        executed") is sent again 0.2 s later while the requests' tasks are still in flight there; the executor
+        runs a request it already has only once. Any other failure is the executor's death, which its collector
+        sees and handles (the tasks in flight retried or failed, :meth:`_executor_died`)."""
+        try:
+            await call
+        except asyncio.CancelledError:
+            raise
+        except Exception as e:
+            if not _temporarily_unavailable(e):
+                return
+            await asyncio.sleep(0.2)
+            for r in reqs:
+                f = self._inflight.get(r["k"])
+                if f is not None and f.executor == i:
+                    self._queue(i, r)
 
     # ---- replies
     async def _collector(self, i: int) -> None:

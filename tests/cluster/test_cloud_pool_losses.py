@@ -1,7 +1,7 @@
 """The cloud pool (aerodaas.schedulers.dispatch.cloud_pool) when a cloud executor is lost or out of reach, with
 in-process executors that fail as Ray calls do: a death fails or retries the tasks in flight and tells the policy;
-an answer lost on the way (Ray's ``ActorUnavailableError``) loses no reply; an executor unreachable for
-``unavailable_after_ms`` counts as dead and gets no new task meanwhile."""
+an answer or a submit call lost on the way (Ray's ``ActorUnavailableError``) loses no reply and runs no task twice;
+an executor unreachable for ``unavailable_after_ms`` counts as dead and gets no new task meanwhile."""
 from __future__ import annotations
 
 import asyncio
@@ -160,6 +160,51 @@ def test_an_executor_unreachable_for_unavailable_after_ms_counts_as_dead_and_get
     assert ev["in_flight"] == 1 and ev["retried"] + ev["failed"] == 1, ev  # only the task sent before it was seen
     assert reached_c1 == 5 + ev["retried"], [(t.state.value, t.tier, t.reason) for t in d.tasks()]
     assert all(t.tier == "cloud" for t in d.tasks())
+
+
+class LostSubmitExecutor(CloudExecutor):
+    """An in-process cloud executor whose first ``lost`` submit calls raise Ray's ``ActorUnavailableError``, the
+    batch accepted first (``arrived``: the answer was lost on the way back) or not (the call never arrived)."""
+
+    lost = 1
+    arrived = True
+
+    async def submit(self, client, reqs):
+        n = await super().submit(client, reqs) if self.arrived or self.lost == 0 else 0
+        if self.lost > 0:
+            self.lost -= 1
+            raise ActorUnavailableError("connection reset", None)
+        return n
+
+
+@pytest.mark.parametrize("arrived", [True, False], ids=["answer-lost", "call-lost"])
+def test_a_submit_call_lost_on_the_way_is_sent_again_and_each_task_runs_once(arrived):
+    """Two submit calls fail as Ray calls to a live actor can ("may or may not have been executed"): the pool
+    sends the batch again, the executor runs each task once (a request it already has is ignored), and both
+    tasks come back DONE from the cloud, not failed by the watchdog as having no reply (minute-long deadlines: the
+    resent batch arrives 0.4 s late, past a LIGHT task's admit-by time)."""
+    w = workload("LIGHT", deadline_ms=60_000.0)
+
+    async def run():
+        ex = LostSubmitExecutor("c0")
+        ex.lost, ex.arrived = 2, arrived
+        pool = CloudPool([ex], jitter=Jitter("none"))
+        d = AnalyticsDispatcher(make_analytics_scheduler("CLOUD", w), EmulatedEdgeExecutor(), pool)
+        await d.start()
+        d.submit("d0", "HV")
+        d.submit("d0", "MD")
+        r = await d.finish(5.0)
+        rep = pool.report()
+        await pool.close()
+        return d, r, rep, ex, await ex.stats()
+
+    d, r, rep, ex, st = asyncio.run(run())
+    check_accounting(d, r)
+    assert ex.lost == 0  # both calls failed
+    assert st["executed"] + st["refused"] == 2, st  # each task reached the executor once
+    assert [(t.state in (TaskState.DONE_ON_TIME, TaskState.DONE_LATE), t.tier) for t in d.tasks()] == \
+        [(True, "cloud")] * 2, [(t.state.value, t.tier, t.reason) for t in d.tasks()]
+    assert rep["losses"] == [] and rep["in_flight"] == 0 and rep["retried"] == 0
 
 
 def test_the_executor_hands_a_reply_out_again_until_acknowledged():

@@ -11,6 +11,7 @@ import pytest
 from aerodaas.schedulers.analytics_base import (
     TERMINAL_STATES, AnalyticsScheduler, Decision, TaskState, Workload, task_utility,
 )
+from tests.cluster.test_edgecloud import workload
 from tests.conftest import DATA_DIR, REPO, needs_data, needs_workload
 
 WORKLOAD = DATA_DIR / "workloads" / "ocularone_lambda.json"
@@ -78,9 +79,7 @@ def test_edge_host_runs_on_the_edge_node_and_cloud_executors_on_cloud_nodes(clus
         # and work flows edge -> cloud -> edge through them
         # deadlines of a minute: the cloud's admission re-check (wall clock) refused one of the two tasks on a
         # loaded machine; this test is about placement and the round trip, not about meeting deadlines
-        data = json.loads(WORKLOAD.read_text())
-        data["loads"]["LIGHT"] = {m: 60_000.0 for m in data["loads"]["LIGHT"]}
-        w = Workload.from_dict(data, "LIGHT")
+        w = workload("LIGHT", deadline_ms=60_000.0)
         ray.get(host.configure.remote(scheduler="CLOUD", workload=w, edge_ids=["e0"], cloud_executors=cloud,
                                       start_epoch=time.time() + 5.0, cloud_jitter="none"))  # lead: a loaded host
         out = ray.get(host.run_trace.remote([(0.0, "e0", "d0", "HV"), (0.0, "e0", "d0", "MD")], 5.0))
