@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 from aerodaas.clusters import reaper
 from aerodaas.clusters.log_monitor import lean_log_monitor
 from aerodaas.clusters.loopback import loopback_only
+from aerodaas.clusters.node_priority import agents_ahead
 from aerodaas.clusters.ray_tls import use_tls
 from aerodaas.clusters.worker_memory import lean_worker_imports, limit_malloc_arenas
 
@@ -120,7 +121,8 @@ class LocalCluster:
         if worker_niceness is not None:  # Ray starts workers at niceness 15 (below the control plane) by default
             head_args["_system_config"] = {"worker_niceness": int(worker_niceness)}
         try:
-            self.cluster = Cluster(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
+            with agents_ahead():  # the raylet aborts when its agents take over 15 s (aerodaas.clusters.node_priority)
+                self.cluster = Cluster(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
         except BaseException:
             self._restore_network()
             self._restore_tls()
@@ -150,9 +152,10 @@ class LocalCluster:
     def add_cloud_node(self, labels: dict[str, str] | None = None, num_gpus: float | None = None):
         """Add a ``tier=cloud`` node (extra ``labels`` allowed; ``num_gpus``: logical GPUs it declares to Ray, a
         scheduling resource whether or not the machine has them; None: what Ray detects) and return its handle."""
-        node = self.cluster.add_node(num_cpus=self._cloud_cpus, labels={"tier": "cloud", **(labels or {})},
-                                     object_store_memory=self._store,
-                                     **({"num_gpus": num_gpus} if num_gpus is not None else {}))
+        with agents_ahead():  # as the head's (aerodaas.clusters.node_priority)
+            node = self.cluster.add_node(num_cpus=self._cloud_cpus, labels={"tier": "cloud", **(labels or {})},
+                                         object_store_memory=self._store,
+                                         **({"num_gpus": num_gpus} if num_gpus is not None else {}))
         self.cloud_nodes.append(node)
         return node
 
@@ -160,9 +163,10 @@ class LocalCluster:
         """Add another ``tier=edge`` node (extra ``labels`` allowed, e.g. ``{"aerodaas/site": "field-2"}``;
         ``num_gpus``: logical GPUs it declares to Ray; None: what Ray detects) and return its handle. The driver
         stays on the head node (the first edge node)."""
-        node = self.cluster.add_node(num_cpus=self._edge_cpus, labels={"tier": "edge", **(labels or {})},
-                                     object_store_memory=self._store,
-                                     **({"num_gpus": num_gpus} if num_gpus is not None else {}))
+        with agents_ahead():  # as the head's (aerodaas.clusters.node_priority)
+            node = self.cluster.add_node(num_cpus=self._edge_cpus, labels={"tier": "edge", **(labels or {})},
+                                         object_store_memory=self._store,
+                                         **({"num_gpus": num_gpus} if num_gpus is not None else {}))
         self.edge_nodes.append(node)
         return node
 

@@ -9,7 +9,8 @@ for file .../metrics_agent_port_..."); ``ray.init`` reports "The current node ti
 at a 1-minute load of 16-18, every process at the default priority, it did not get that in 15 s, three attempts in
 a row.
 
-:func:`agents_ahead` makes a node that ``ray.init`` starts within it run both agents under ``nice -n``
+:func:`agents_ahead` makes a node that ``ray.init`` or ``ray.cluster_utils.Cluster`` starts within it (``aerodaas
+run``'s own Ray, ``aerodaas up``, :class:`~aerodaas.clusters.local.LocalCluster`) run both agents under ``nice -n``
 :data:`AGENT_NICE_DELTA` (coreutils ``nice``, which then execs the agent: the raylet's pid bookkeeping and fate
 sharing see the agent itself). The agents are idle but for a few polls once started; the GCS, the raylet, the log
 monitor and the workers (the run's actors) keep their niceness. Lowering a niceness needs ``CAP_SYS_NICE`` (root);
@@ -57,9 +58,9 @@ def may_lower_niceness() -> bool:
 
 @contextlib.contextmanager
 def agents_ahead() -> Iterator[bool]:
-    """Within the block, a node that ``ray.init`` starts in this process starts its agents (:data:`AGENTS`) at
-    :data:`AGENT_NICE_DELTA` below the raylet's niceness (see the module). Yields True when in effect; False (nothing
-    changed) when ``AERODAAS_NODE_NICE`` is ``0``, this process may not lower a niceness, there is no ``nice``
+    """Within the block, a node that ``ray.init`` or ``ray.cluster_utils.Cluster`` starts in this process starts its
+    agents (:data:`AGENTS`) at :data:`AGENT_NICE_DELTA` below the raylet's niceness (see the module). Yields True
+    when in effect; False (nothing changed) when ``AERODAAS_NODE_NICE`` is ``0``, this process may not lower a niceness, there is no ``nice``
     command, or this Ray has no such command builder. Ray's module is restored on leaving. Not re-entrant across
     threads: a second block waits."""
     nice = shutil.which("nice")

@@ -34,6 +34,7 @@ from typing import Any
 from aerodaas.clusters import reaper
 from aerodaas.clusters.log_monitor import lean_log_monitor
 from aerodaas.clusters.node_logs import default_temp_dir, failed_start_report
+from aerodaas.clusters.node_priority import agents_ahead
 from aerodaas.clusters.state_folder import state_dir
 
 __all__ = ["attached_address", "await_fresh_workers", "down", "importable_by_cluster", "not_on_cluster_path",
@@ -184,7 +185,8 @@ def _start_head(cluster_type: Any, head_args: dict[str, Any]) -> Any:
         before = set(reaper.descendants(os.getpid()))
         since_s = time.time()
         try:
-            return cluster_type(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
+            with agents_ahead():  # the raylet aborts when its agents take over 15 s (aerodaas.clusters.node_priority)
+                return cluster_type(initialize_head=True, shutdown_at_exit=True, head_node_args=head_args)
         except Exception as e:  # noqa: BLE001 - Ray raises a bare Exception for this one
             if "timed out during startup" not in str(e):
                 raise

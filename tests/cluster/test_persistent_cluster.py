@@ -12,6 +12,7 @@ import sys
 import psutil
 import pytest
 
+from tests.cluster.node_nices import expected_agent_nice, node_nices
 from tests.conftest import REPO
 
 
@@ -31,6 +32,10 @@ def test_up_starts_one_loopback_head_and_down_stops_only_its_processes(tmp_path)
         procs = [daemon, *daemon.children(recursive=True)]
         pids = {q.pid for q in procs}
         assert len(pids) >= 3, procs  # the daemon, the GCS, the raylet (and agents, dashboard)
+        # the raylet's agents ahead of the load (aerodaas.clusters.node_priority), the rest at the daemon's niceness
+        nices, daemon_nice = node_nices(st["pid"]), daemon.nice()
+        assert nices["raylet"] == [[daemon_nice]] and nices["gcs_server"] == [[daemon_nice]], nices
+        assert nices["DashboardAgent"] == nices["RuntimeEnvAgent"] == [[expected_agent_nice(daemon_nice)]], nices
         listening = [c for c in psutil.net_connections("inet") if c.status == psutil.CONN_LISTEN and c.pid in pids]
         assert listening and all(ipaddress.ip_address(c.laddr.ip.removeprefix("::ffff:")).is_loopback
                                  for c in listening), listening
