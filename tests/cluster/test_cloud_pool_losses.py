@@ -75,6 +75,23 @@ def test_cloud_loss_in_process_fails_in_flight_tasks_and_tells_the_policy():
     assert ev["in_flight"] == 2 and ev["failed"] == 2 and ev["retried"] == 0 and "node lost" in ev["error"]
 
 
+def _two_tasks_through(ex: CloudExecutor, w) -> tuple:
+    """An HV and an MD task of one drone through a CLOUD dispatcher whose pool has the one executor ``ex``, run to
+    the end (5 s at most): ``(dispatcher, its finish() report, the pool's report)``."""
+    async def run():
+        pool = CloudPool([ex], jitter=Jitter("none"))
+        d = AnalyticsDispatcher(make_analytics_scheduler("CLOUD", w), EmulatedEdgeExecutor(), pool)
+        await d.start()
+        d.submit("d0", "HV")
+        d.submit("d0", "MD")
+        r = await d.finish(5.0)
+        rep = pool.report()
+        await pool.close()
+        return d, r, rep
+
+    return asyncio.run(run())
+
+
 class FlakyExecutor(CloudExecutor):
     """An in-process cloud executor whose first ``unavailable`` answers carrying replies are lost on the way back:
     the call raises Ray's ``ActorUnavailableError`` after the executor handed the replies out, as a call to a live
@@ -95,22 +112,9 @@ def test_an_executor_briefly_unavailable_loses_no_reply_and_stays(lost_answers):
     """The answers of ``collect`` calls lost on the way back: the executor keeps its replies until the pool
     acknowledges them, so both tasks come back DONE from the cloud, nothing counts as lost and the executor stays
     in the pool."""
-    w = workload("LIGHT")
-
-    async def run():
-        ex = FlakyExecutor("c0")
-        ex.unavailable = lost_answers
-        pool = CloudPool([ex], jitter=Jitter("none"))
-        d = AnalyticsDispatcher(make_analytics_scheduler("CLOUD", w), EmulatedEdgeExecutor(), pool)
-        await d.start()
-        d.submit("d0", "HV")
-        d.submit("d0", "MD")
-        r = await d.finish(5.0)
-        rep = pool.report()
-        await pool.close()
-        return d, r, rep, ex
-
-    d, r, rep, ex = asyncio.run(run())
+    ex = FlakyExecutor("c0")
+    ex.unavailable = lost_answers
+    d, r, rep = _two_tasks_through(ex, workload("LIGHT"))
     check_accounting(d, r)
     assert ex.unavailable == 0  # the answers were lost
     # done (on time or late: each lost answer costs a 0.2 s pause), in the cloud
@@ -183,25 +187,12 @@ def test_a_submit_call_lost_on_the_way_is_sent_again_and_each_task_runs_once(arr
     sends the batch again, the executor runs each task once (a request it already has is ignored), and both
     tasks come back DONE from the cloud, not failed by the watchdog as having no reply (minute-long deadlines: the
     resent batch arrives 0.4 s late, past a LIGHT task's admit-by time)."""
-    w = workload("LIGHT", deadline_ms=60_000.0)
-
-    async def run():
-        ex = LostSubmitExecutor("c0")
-        ex.lost, ex.arrived = 2, arrived
-        pool = CloudPool([ex], jitter=Jitter("none"))
-        d = AnalyticsDispatcher(make_analytics_scheduler("CLOUD", w), EmulatedEdgeExecutor(), pool)
-        await d.start()
-        d.submit("d0", "HV")
-        d.submit("d0", "MD")
-        r = await d.finish(5.0)
-        rep = pool.report()
-        await pool.close()
-        return d, r, rep, ex, await ex.stats()
-
-    d, r, rep, ex, st = asyncio.run(run())
+    ex = LostSubmitExecutor("c0")
+    ex.lost, ex.arrived = 2, arrived
+    d, r, rep = _two_tasks_through(ex, workload("LIGHT", deadline_ms=60_000.0))
     check_accounting(d, r)
     assert ex.lost == 0  # both calls failed
-    assert st["executed"] + st["refused"] == 2, st  # each task reached the executor once
+    assert ex.executed + ex.refused == 2, (ex.executed, ex.refused)  # each task reached the executor once
     assert [(t.state in (TaskState.DONE_ON_TIME, TaskState.DONE_LATE), t.tier) for t in d.tasks()] == \
         [(True, "cloud")] * 2, [(t.state.value, t.tier, t.reason) for t in d.tasks()]
     assert rep["losses"] == [] and rep["in_flight"] == 0 and rep["retried"] == 0
