@@ -60,9 +60,9 @@ def may_lower_niceness() -> bool:
 def agents_ahead() -> Iterator[bool]:
     """Within the block, a node that ``ray.init`` or ``ray.cluster_utils.Cluster`` starts in this process starts its
     agents (:data:`AGENTS`) at :data:`AGENT_NICE_DELTA` below the raylet's niceness (see the module). Yields True
-    when in effect; False (nothing changed) when ``AERODAAS_NODE_NICE`` is ``0``, this process may not lower a niceness, there is no ``nice``
-    command, or this Ray has no such command builder. Ray's module is restored on leaving. Not re-entrant across
-    threads: a second block waits."""
+    when in effect; False (nothing changed) when ``AERODAAS_NODE_NICE`` is ``0``, this process may not lower a
+    niceness, there is no ``nice`` command, or this Ray has no such command builder. Ray's module is restored on
+    leaving. Not re-entrant across threads: a second block waits."""
     nice = shutil.which("nice")
     if os.environ.get("AERODAAS_NODE_NICE", "").strip() == "0" or nice is None:
         yield False

@@ -11,9 +11,10 @@ calls adapts to the load, and a completion waits at most one call round trip, a 
 surfaces on that outstanding call at once (``ActorDiedError``). Each ``collect`` acknowledges the replies of the
 previous one and the executor keeps a reply until acknowledged, so a call whose answer is lost on the way
 (``ActorUnavailableError``: a live actor Ray could not reach for a moment) is simply repeated and loses nothing;
-a ``submit`` call failing so is sent again (the executor runs a request it already has only once); new tasks go to the other executors meanwhile, and one unreachable for ``unavailable_after_ms`` (3 s) counts as dead
-(a call to an actor on a node that just died raises the same error until Ray learns of the death, which can take
-ten seconds and more on a loaded machine).
+a ``submit`` call failing so is sent again (the executor runs a request it already has only once); new tasks go
+to the other executors meanwhile, and one unreachable for ``unavailable_after_ms`` (3 s) counts as dead (a call to
+an actor on a node that just died raises the same error until Ray learns of the death, which can take ten seconds
+and more on a loaded machine).
 
 Each Ray hop can be delayed by CPU contention (tens of ms on a busy 2-core machine), while the edge's holds are
 timers in one process and stay within a few ms. So in emulated mode the executor holds the task on the intended

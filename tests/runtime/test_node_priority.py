@@ -21,15 +21,7 @@ import json, os
 import ray
 from aerodaas.runtime.ray_start import init_ray
 from aerodaas.clusters import reaper
-
-def nices(pid):
-    out = set()
-    for tid in os.listdir(f"/proc/{pid}/task"):
-        try:
-            out.add(int(open(f"/proc/{pid}/task/{tid}/stat").read().rsplit(")", 1)[1].split()[16]))
-        except OSError:
-            pass
-    return sorted(out)
+from tests.cluster.node_nices import thread_nices as nices
 
 init_ray(None)
 
