@@ -15,11 +15,15 @@ mavlink_mission.cpp``, ``MavlinkMissionManager::parse_mavlink_mission_item`` / `
 the navigator's dataman mission storage) keeps a position command's frame, position, hold time, acceptance radius
 and yaw, takes a command without a position only in ``MAV_FRAME_MISSION`` and returns its seven params as sent.
 Fields a vehicle does not keep are reported, not hidden; a changed command, position, altitude, frame of a
-position, hold time or speed is a different flight.
+position, hold time or speed is a different flight. ArduPilot stores an altitude in whole centimetres and ArduCopter
+a hold time in whole seconds (``cmd.content.location.alt = packet.z * 100.0f``, ``cmd.p1 = packet.param1``, both
+integers): told which autopilot stored the mission, a value kept at that precision is reported, not a different
+flight.
 """
 from __future__ import annotations
 
 import math
+import struct
 from typing import NamedTuple, Sequence
 
 from aerodaas.missionfile._common import _fail
@@ -29,7 +33,8 @@ from aerodaas.missionfile.commands import (MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_
                                            POSITION_COMMANDS, _RELATIVE_FRAMES, frame_name)
 from aerodaas.missionfile.items import MissionItem
 
-__all__ = ["ItemDifference", "mission_differences", "FLIGHT_PARAMS", "FrameChange", "mission_frames", "SpeedChange",
+__all__ = ["ItemDifference", "mission_differences", "ardupilot_stored_altitude", "ardupilot_stored_seconds",
+           "FLIGHT_PARAMS", "FrameChange", "mission_frames", "SpeedChange",
            "cap_speeds", "check_relative_altitudes"]
 
 #: a frame and its ``_INT`` twin (common.xml: the same meaning, x/y as integers on the wire)
@@ -62,12 +67,21 @@ class ItemDifference(NamedTuple):
     sent: float | int | None
     stored: float | int | None
     flight: bool
+    #: the autopilot's documented storage of the field when the stored value is the sent one at that precision
+    #: (e.g. "ArduPilot keeps an altitude in whole centimetres"); None: a field the vehicle does not keep, or a
+    #: different value
+    precision: str | None = None
 
     def __str__(self) -> str:
         def show(v):
             return "unset" if v is None else f"{v:g}" if isinstance(v, float) else str(v)
 
         return f"{self.item}: {self.field} {show(self.sent)} sent, {show(self.stored)} stored"
+
+    def explained(self) -> str:
+        """The difference with why the vehicle holds it: its :attr:`precision`, else "a field it does not keep"
+        (for a difference that does not change the flight)."""
+        return f"{self} ({self.precision or 'a field it does not keep'})"
 
 
 def _same(a: float | None, b: float | None, abs_tol: float, rel_tol: float = 0.0) -> bool:
@@ -76,17 +90,55 @@ def _same(a: float | None, b: float | None, abs_tol: float, rel_tol: float = 0.0
     return math.isclose(a, b, rel_tol=rel_tol, abs_tol=abs_tol)
 
 
-def mission_differences(sent: Sequence[MissionItem], stored: Sequence[MissionItem]) -> list[ItemDifference]:
+#: the commands whose param1 ArduCopter keeps as a whole number of seconds (``AP_Mission::mavlink_int_to_mission_cmd``:
+#: ``cmd.p1 = packet.param1``, a uint16: NAV_WAYPOINT's hold time, NAV_LOITER_TIME's loiter time)
+_ARDUPILOT_WHOLE_SECONDS = frozenset({MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME})
+
+
+def _float32(v: float) -> float:
+    return struct.unpack("f", struct.pack("f", v))[0]
+
+
+def ardupilot_stored_altitude(z_m: float) -> float:
+    """The altitude (m) ArduPilot stores for ``z_m`` sent with a position: whole centimetres, truncated toward zero
+    (``AP_Mission::mavlink_int_to_mission_cmd``: ``cmd.content.location.alt = packet.z * 100.0f``, an int32, in
+    float32 arithmetic), read back as ``alt * 0.01f`` (``mission_cmd_to_mavlink_int``). Source:
+    ``libraries/AP_Mission/AP_Mission.cpp``."""
+    return math.trunc(_float32(_float32(z_m) * 100.0)) / 100.0
+
+
+def ardupilot_stored_seconds(p: float) -> float:
+    """The hold or loiter time (s) ArduCopter stores for ``p`` sent as param1 of NAV_WAYPOINT or NAV_LOITER_TIME:
+    whole seconds, truncated (a uint16, ``cmd.p1 = packet.param1``; ``libraries/AP_Mission/AP_Mission.cpp``). A value
+    outside 0..65535 is returned unchanged (the conversion is undefined there: compared as sent)."""
+    return float(math.trunc(p)) if 0.0 <= p < 65536.0 else p
+
+
+def _float32_degrees_tolerance(v: float) -> float:
+    """How far a latitude/longitude (degrees) carried as float32 (MISSION_ITEM) may read back from the one sent on
+    the 1e-7 degree grid: two float32 steps at ``v`` (the vehicle's own conversion of its int32 to float, e.g.
+    ArduPilot's ``lat * 1.0e-7f`` in float32, rounds twice) and the grid's half step."""
+    return 2.0 * math.ulp(abs(v)) * 2.0 ** 29 + 0.6e-7  # a float32 step: the double's ulp times 2**(52 - 23)
+
+
+def mission_differences(sent: Sequence[MissionItem], stored: Sequence[MissionItem], *, autopilot: str | None = None,
+                        float_positions: bool = False) -> list[ItemDifference]:
     """What the vehicle's mission (``stored``: a download, ArduPilot's home item left out) holds differently from
     ``sent`` (the items as uploaded: latitude/longitude on the 1e-7 degree grid, params as float32). Compared per
     item: the command; params (float32 tolerance; a 0 stored for an unset param is a difference), a difference
     changing the flight for the params of :data:`FLIGHT_PARAMS`; for a command of
     :data:`~aerodaas.missionfile.commands.POSITION_COMMANDS` the frame (a frame equals its ``_INT`` twin),
-    latitude/longitude (within 0.6e-7 degree) and altitude (1 mm). A command without a position has no frame and
-    no position to keep (ArduPilot returns frame 0, x/y/z 0): its frame is not compared, its x/y/z only as
-    fields it does not keep. A different number of items is one ``count`` difference (the items are then
-    compared as far as both go)."""
+    latitude/longitude (within 0.6e-7 degree; ``float_positions``: read back as float32 degrees, MISSION_ITEM,
+    within two float32 steps more) and altitude (1 mm). A command without a position has no frame and no position
+    to keep (ArduPilot returns frame 0, x/y/z 0): its frame is not compared, its x/y/z only as fields it does not
+    keep. A different number of items is one ``count`` difference (the items are then compared as far as both go).
+
+    ``autopilot`` ``"ardupilot"``: a value stored at ArduPilot's own precision is a difference that does not change
+    the flight, with its :attr:`ItemDifference.precision` said: an altitude in whole centimetres
+    (:func:`ardupilot_stored_altitude`), a waypoint's hold time and a loiter time in whole seconds
+    (:func:`ardupilot_stored_seconds`); any other value there is still a different flight."""
     out: list[ItemDifference] = []
+    ardupilot = autopilot == "ardupilot"
     if len(sent) != len(stored):
         out.append(ItemDifference(0, "mission", "count", len(sent), len(stored), True))
     for k, (a, b) in enumerate(zip(sent, stored), start=1):
@@ -101,13 +153,24 @@ def mission_differences(sent: Sequence[MissionItem], stored: Sequence[MissionIte
         for i, name in enumerate(_FIELDS):
             pa, pb = a.params[i], b.params[i]
             if i in (4, 5) and positional:
-                if not _same(pa, pb, 0.6e-7):
+                tol = _float32_degrees_tolerance(pa) if float_positions and pa is not None else 0.6e-7
+                if not _same(pa, pb, tol):
                     out.append(ItemDifference(k, tag, "latitude" if i == 4 else "longitude", pa, pb, True))
             elif i == 6 and positional:
-                if not _same(pa, pb, 1e-3, rel_tol=1e-6):
+                if _same(pa, pb, 1e-3, rel_tol=1e-6):
+                    continue
+                if ardupilot and pa is not None and _same(ardupilot_stored_altitude(pa), pb, 1e-3, rel_tol=1e-6):
+                    out.append(ItemDifference(k, tag, "altitude", pa, pb, False,
+                                              "ArduPilot keeps an altitude in whole centimetres"))
+                else:
                     out.append(ItemDifference(k, tag, "altitude", pa, pb, True))
             elif not _same(pa, pb, 1e-6, rel_tol=1e-6):  # float32 on the wire
-                out.append(ItemDifference(k, tag, name, pa, pb, i in flight_params))
+                if (ardupilot and i == 0 and a.command in _ARDUPILOT_WHOLE_SECONDS and pa is not None
+                        and _same(ardupilot_stored_seconds(pa), pb, 1e-6)):
+                    out.append(ItemDifference(k, tag, name, pa, pb, False,
+                                              "ArduCopter keeps this time in whole seconds"))
+                else:
+                    out.append(ItemDifference(k, tag, name, pa, pb, i in flight_params))
     return out
 
 

@@ -124,9 +124,20 @@ def _cruise_speed(backend) -> float | None:
 def _report_upload(backend, sent, name: str, where: str, connection: str) -> None:
     """Say what the backend's upload did (its events, :meth:`~aerodaas.backends.mavlink.mission.AutopilotMission.
     upload`): the items sent, a mission the vehicle replaced right after accepting it (uploaded once more, on
-    stderr), and each field the vehicle's read-back holds differently without changing the flight."""
+    stderr), and each field the vehicle's read-back holds differently without changing the flight, with why."""
     print(f"{name}: {len(sent)} items from {where} uploaded to the {backend.link.autopilot} vehicle on "
           f"{connection}", flush=True)
+    not_kept = _say_upload_events(backend, name)
+    for d in not_kept:
+        print(f"{name}: note: the vehicle stored {d}", file=sys.stderr, flush=True)
+    print(f"{name}: read back: the vehicle holds the {len(sent)} items as sent"
+          + (f", but for {len(not_kept)} field(s) it stores otherwise (above)" if not_kept else ""), flush=True)
+
+
+def _say_upload_events(backend, name: str) -> list[str]:
+    """Print each ``mission_replaced`` event of the backend's upload (on stderr: the vehicle held another mission
+    right after accepting ours, so it was uploaded once more) and return the ``fields_not_kept`` of its
+    ``mission_uploaded`` event (empty when the upload failed)."""
     not_kept: list[str] = []
     for ev in backend.drain_events():
         if ev["event"] == "mission_replaced":
@@ -135,10 +146,7 @@ def _report_upload(backend, sent, name: str, where: str, connection: str) -> Non
                   file=sys.stderr, flush=True)
         elif ev["event"] == "mission_uploaded":
             not_kept = ev["fields_not_kept"]
-    for d in not_kept:
-        print(f"{name}: note: the vehicle stored {d} (a field it does not keep)", file=sys.stderr, flush=True)
-    print(f"{name}: read back: the vehicle holds the {len(sent)} items as sent"
-          + (f", but for {len(not_kept)} field(s) it does not keep (above)" if not_kept else ""), flush=True)
+    return not_kept
 
 
 def upload(request: Upload) -> int:
@@ -214,7 +222,11 @@ def _upload(request: Upload, name: str, opened: list) -> None:
         items, changes = cap_speeds(items, request.max_speed_mps, _cruise_speed(backend))
         for c in changes:
             print(f"{name}: {c}", flush=True)
-    sent = backend.mission.upload(items)  # read back and compared by the backend (a different flight raises)
+    try:
+        sent = backend.mission.upload(items)  # read back and compared by the backend (a different flight raises)
+    except BackendError:
+        _say_upload_events(backend, name)  # the first read-back's difference, before the error itself
+        raise
     _report_upload(backend, sent, name, repr(str(path)), request.link.connection)
     if request.start:
         backend.actions.arm()

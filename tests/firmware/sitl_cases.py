@@ -249,7 +249,7 @@ def test_autopilot_mission_holds_and_reaches(session, autopilot):
 
 def test_mission_upload_start(session, autopilot):
     """`aerodaas mission upload FILE --start --max-speed 2` on the landed vehicle: uploaded with a DO_CHANGE_SPEED
-    2 m/s inserted after the take-off (said), armed, flown by the autopilot at no more than that + 10 % (an observer
+    2 m/s inserted after the take-off (said; ArduCopter's whole seconds and centimetres said too), armed, flown by the autopilot at no more than that + 10 % (an observer
     on the link sees both waypoints at 2 m) and landed. The speed: the estimate's velocity on ArduCopter; on stock PX4
     SIH, whose position estimate stalls and catches up (one run: 6 m in 2 s, 3.7 m/s, over 4 s 1.97 m/s), the
     distance the estimate moved over every >= 4 s of vehicle time (:func:`test_speed_stays_within_the_limit`). On
@@ -260,6 +260,10 @@ def test_mission_upload_start(session, autopilot):
     assert up["rc"] == 0, up["out"][-2000:]
     assert "inserted: DO_CHANGE_SPEED 2 m/s (--max-speed 2 m/s" in up["out"], up["out"][-2000:]
     assert "read back: the vehicle holds the 5 items as sent" in up["out"], up["out"][-2000:]
+    if autopilot == "ardupilot":  # the first waypoint as ArduCopter stores it (AP_Mission): said, not refused
+        for kept in ("param1 2.5 sent, 2 stored (ArduCopter keeps this time in whole seconds)",
+                     "altitude 2.004 sent, 2 stored (ArduPilot keeps an altitude in whole centimetres)"):
+            assert kept in up["out"], up["out"][-2000:]
     obs = session["observe"]["observed"]
     assert obs.get("armed") and obs.get("landed"), session["observe"]["out"][-2000:]
     pts = [(s[1], s[2], s[3]) for s in obs["samples"]]

@@ -26,14 +26,15 @@ MSG_MISSION_CURRENT = 42
 
 def mission_file(path: Path, home: dict) -> Path:
     """A QGC WPL 110 mission written to ``path``: take off (at ``home``, a dict of lat/lon/alt) to 2 m, two waypoints
-    6 m apart (hold 3 s), land (:func:`tests.firmware.sitl.single_vehicle_session`'s ``mission upload --start``)."""
+    6 m apart (the first at 2.004 m, hold 2.5 s: ArduCopter keeps 2 m and 2 s; the second at 2 m, hold 3 s), land
+    (:func:`tests.firmware.sitl.single_vehicle_session`'s ``mission upload --start``)."""
     from aerodaas.model.geo import enu_to_geodetic
 
     h = GeoPoint(**home)
     a, b = enu_to_geodetic(0.0, 6.0, 0.0, h), enu_to_geodetic(6.0, 6.0, 0.0, h)
     rows = ["QGC WPL 110", f"0\t1\t0\t16\t0\t0\t0\t0\t{h.lat:.7f}\t{h.lon:.7f}\t{h.alt:.2f}\t1",
             f"1\t0\t3\t22\t0\t0\t0\t0\t{h.lat:.7f}\t{h.lon:.7f}\t2.0\t1",  # PX4 takes 0, 0 literally
-            f"2\t0\t3\t16\t3\t0\t0\t0\t{a.lat:.7f}\t{a.lon:.7f}\t2.0\t1",
+            f"2\t0\t3\t16\t2.5\t0\t0\t0\t{a.lat:.7f}\t{a.lon:.7f}\t2.004\t1",
             f"3\t0\t3\t16\t3\t0\t0\t0\t{b.lat:.7f}\t{b.lon:.7f}\t2.0\t1",
             f"4\t0\t3\t21\t0\t0\t0\t0\t{b.lat:.7f}\t{b.lon:.7f}\t0\t1"]
     path.write_text("\n".join(rows) + "\n")

@@ -17,10 +17,11 @@ REFUSED = {"ardupilot": "MAV_RESULT_FAILED", "px4": "MAV_RESULT_TEMPORARILY_REJE
 PREARM_PREFIX = {"ardupilot": "Arm: ", "px4": "Preflight Fail: "}  # a refused arm command, as the firmware says
 
 
-def replace_mission_on_read(emu, times: int) -> list[int]:
+def replace_mission_on_read(emu, times: int, shift_last: bool = False) -> list[int]:
     """Make the emulated vehicle drop its mission (hold none) just before each of the first ``times`` mission
-    downloads, as PX4 does when a mission state published meanwhile replaces the one just uploaded. Returns the
-    list of mission lengths it dropped."""
+    downloads, as PX4 does when a mission state published meanwhile replaces the one just uploaded; with
+    ``shift_last``, hold another mission instead: the same items, the last one's latitude 1e-5 degree (about 1 m)
+    further north. Returns the list of mission lengths it replaced."""
     handler = emu.handlers["MISSION_REQUEST_LIST"]
     dropped: list[int] = []
 
@@ -28,7 +29,10 @@ def replace_mission_on_read(emu, times: int) -> list[int]:
         if getattr(msg, "mission_type", 0) == 0 and len(dropped) < times:
             with emu._lock:
                 dropped.append(len(emu.missions.mission))
-                emu.missions.mission = []
+                if shift_last:
+                    emu.missions.mission[-1].x += 100  # MISSION_ITEM_INT latitude, 1e-7 degree units
+                else:
+                    emu.missions.mission = []
         handler(link, msg)
 
     emu.handlers["MISSION_REQUEST_LIST"] = replaced

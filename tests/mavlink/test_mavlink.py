@@ -221,7 +221,8 @@ def test_a_mission_the_vehicle_replaces_right_after_the_upload_is_sent_once_more
     wps = [Waypoint(id=f"wp{i}", x=x, y=0.0, z=5.0) for i, x in enumerate((8.0, 16.0))]
     dropped = replace_mission_on_read(emu, replaced)
     if replaced == 2:
-        with pytest.raises(BackendError, match="mission: count 4 sent, 0 stored; not started"):
+        with pytest.raises(BackendError, match="mission: count 4 sent, 0 stored; not started; the vehicle's "
+                                               "mission cleared"):
             b.mission.upload(wps, takeoff_altitude=5.0, final_action="land")
         assert dropped == [4, 4] and emu.snapshot()["mission_len"] == 0
         assert not [e for e in b.drain_events() if e["event"] == "mission_uploaded"]
@@ -233,6 +234,38 @@ def test_a_mission_the_vehicle_replaces_right_after_the_upload_is_sent_once_more
         [(4, 0, ["mission: count 4 sent, 0 stored"])]
     assert [e["count"] for e in ev if e["event"] == "mission_uploaded"] == [4]
     assert b.mission.download().items == sent and emu.snapshot()["mission_len"] == 4
+
+
+def test_a_vehicle_holding_another_mission_after_two_uploads_is_left_with_none(fly):
+    """The read-back of both uploads holds another mission (a waypoint 1 m off): the upload raises naming it, and
+    clears the vehicle's mission, so that no AUTO / MISSION switch can fly what was never sent."""
+    emu, b = fly("px4")
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    dropped = replace_mission_on_read(emu, 2, shift_last=True)
+    wps = [Waypoint(id=f"wp{i}", x=x, y=0.0, z=5.0) for i, x in enumerate((8.0, 16.0))]
+    with pytest.raises(BackendError, match=r"item 4 \(MAV_CMD_NAV_LAND \(21\)\): latitude .* not started; the "
+                                           r"vehicle's mission cleared"):
+        b.mission.upload(wps, takeoff_altitude=5.0, final_action="land")
+    assert dropped == [4, 4] and emu.snapshot()["mission_len"] == 0
+
+
+def test_ardupilot_keeps_a_hold_in_whole_seconds_and_an_altitude_in_centimetres_the_mission_is_the_one_sent(fly):
+    """ArduCopter stores a waypoint's hold time as whole seconds and an altitude as whole centimetres
+    (``AP_Mission::mavlink_int_to_mission_cmd``; the emulator stores them so): the read-back names both with why,
+    and the upload is the one sent, neither uploaded again nor refused."""
+    emu, b = fly("ardupilot")
+    assert run_until(b, lambda: b.telemetry.home_received, 5)
+    wps = [Waypoint(id="a", x=8.0, y=0.0, z=5.005, hover_duration=2.5), Waypoint(id="b", x=16.0, y=0.0, z=5.0)]
+    b.mission.upload(wps, takeoff_altitude=5.0, final_action="land")
+    ev = b.drain_events()
+    assert not [e for e in ev if e["event"] == "mission_replaced"], ev
+    notes = [n for e in ev if e["event"] == "mission_uploaded" for n in e["fields_not_kept"]]
+    assert "item 2 (MAV_CMD_NAV_WAYPOINT (16)): param1 2.5 sent, 2 stored (ArduCopter keeps this time in whole " \
+           "seconds)" in notes, notes
+    assert any(n.startswith("item 2 (MAV_CMD_NAV_WAYPOINT (16)): altitude 5.005 sent, 5 stored (ArduPilot keeps an "
+                            "altitude in whole centimetres)") for n in notes), notes
+    held = b.mission.download().items[1]
+    assert held.params[0] == 2.0 and held.params[6] == pytest.approx(5.0, abs=1e-5)
 
 
 @pytest.mark.parametrize("autopilot", AUTOPILOTS)

@@ -218,6 +218,9 @@ def test_a_mission_the_vehicle_replaces_twice_is_not_started(vehicle, tmp_path, 
     assert main(["mission", "upload", str(path), "--connection", address, "--start"]) == 2
     err = capsys.readouterr().err
     assert dropped == [5, 5], dropped
+    # the first read-back's replacement is said too, before the error
+    assert "right after accepting the 5 items the vehicle held 0 (mission: count 5 sent, 0 stored): another " \
+           "mission replaced it; uploaded it once more" in err, err
     assert "the mission read back differs from the one sent: mission: count 5 sent, 0 stored; not started" in err, err
     assert not emu.snapshot()["armed"]
 

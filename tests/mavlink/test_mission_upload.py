@@ -116,3 +116,33 @@ def test_items_without_a_position_go_up_in_mav_frame_mission_and_each_change_is_
     assert str(changes[1]) == ("item 5 (MAV_CMD_NAV_RETURN_TO_LAUNCH (20)): frame MAV_FRAME_GLOBAL_RELATIVE_ALT (3) "
                                "sent as MAV_FRAME_MISSION (2) (the command has no position; PX4 refuses it in a "
                                "global frame, ArduPilot stores no frame for it)")
+
+
+def test_what_ardupilot_keeps_at_its_own_precision_is_noted_not_a_different_flight():
+    """ArduCopter stores a hold time in whole seconds and an altitude in whole centimetres (AP_Mission): told the
+    vehicle is ArduPilot, those are noted with why; any other value there, or another autopilot, is another flight."""
+    from aerodaas.missionfile.upload import ardupilot_stored_altitude
+
+    held = _wp(1, z=12.345).model_copy(update={"params": [2.5, *_wp(1).params[1:6], 12.345]})
+    kept = _wp(1, z=ardupilot_stored_altitude(12.345)).model_copy(update={"params": [2.0, *_wp(1).params[1:6],
+                                                                                     12.34]})
+    d = mission_differences([held], [kept], autopilot="ardupilot")
+    assert [(x.field, x.flight) for x in d] == [("param1", False), ("altitude", False)]
+    assert d[0].explained().endswith("(ArduCopter keeps this time in whole seconds)")
+    assert d[1].explained() == ("item 1 (MAV_CMD_NAV_WAYPOINT (16)): altitude 12.345 sent, 12.34 stored (ArduPilot "
+                                "keeps an altitude in whole centimetres)")
+    assert [(x.field, x.flight) for x in mission_differences([held], [kept], autopilot="px4")] == \
+        [("param1", True), ("altitude", True)]
+    other = kept.model_copy(update={"params": [0.0, *kept.params[1:6], 12.3]})  # 0 s, 12.30 m: not 2.5 nor 12.345
+    assert [(x.field, x.flight) for x in mission_differences([held], [other], autopilot="ardupilot")] == \
+        [("param1", True), ("altitude", True)]
+    assert ardupilot_stored_altitude(-3.009) == -3.0  # truncated toward zero, as C converts a float to an int
+
+
+def test_positions_read_back_as_float32_degrees_are_compared_within_float32_precision():
+    """A vehicle answering with MISSION_ITEM carries degrees as float32 (about 4e-6 apart near 47 degrees), which
+    its own conversion may round twice: within two float32 steps the same position, beyond it another flight."""
+    assert mission_differences([_wp(1)], [_wp(1, lat=47.3977420 + 5e-6)], float_positions=True) == []
+    assert [x.field for x in mission_differences([_wp(1)], [_wp(1, lat=47.3977420 + 5e-6)])] == ["latitude"]
+    assert [x.field for x in mission_differences([_wp(1)], [_wp(1, lat=47.3977420 + 1e-5)], float_positions=True)] \
+        == ["latitude"]

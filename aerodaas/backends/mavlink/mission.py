@@ -51,14 +51,6 @@ def _float_degrees(v: float) -> float:
     return round(_f32(v) * 1e7) / 1e7
 
 
-def _as_float_degrees(item: MissionItem) -> MissionItem:
-    """``item`` with a global position as it reads back in a MISSION_ITEM (:func:`_float_degrees`)."""
-    if item.frame not in _GLOBAL_FRAMES or item.params[4] is None or item.params[5] is None:
-        return item
-    return item.model_copy(update={"params": [*item.params[:4], _float_degrees(item.params[4]),
-                                              _float_degrees(item.params[5]), item.params[6]]})
-
-
 class AutopilotMission:
     """The vehicle's own mission: built from waypoints (or given as items), uploaded, downloaded, cleared and
     started over the mission protocol, and its progress reported as events.
@@ -154,12 +146,15 @@ class AutopilotMission:
         (event ``mission_replaced``), since PX4 can replace a mission it has just accepted
         (``src/modules/mavlink/mavlink_mission.cpp``, ``MavlinkMissionManager::check_active_mission``: a mission
         state published on its ``mission`` topic with another mission id, such as the navigator's own copy,
-        replaces the count just stored). Event ``mission_uploaded``: ``count`` and ``fields_not_kept`` (each field
-        the vehicle stores differently without changing the flight, said as text).
+        replaces the count just stored). A value ArduPilot stores at its own precision (an altitude in whole
+        centimetres, a hold time in whole seconds) is the same flight. Event ``mission_uploaded``: ``count`` and
+        ``fields_not_kept`` (each field the vehicle stores differently without changing the flight, said as text
+        with why: not kept, or kept at the autopilot's precision).
 
         Returns the items as sent (``seq`` from 1; latitude/longitude rounded to 1e-7 degrees, params to float32),
         which :meth:`download` returns unchanged. Raises BackendError when the read-back of the second upload
-        still differs in the flight (named, "not started"), CommandRefused (MAV_MISSION_RESULT name) when the
+        still differs in the flight (named, "not started"; the vehicle's mission is then cleared, and the error
+        says whether that succeeded), CommandRefused (MAV_MISSION_RESULT name) when the
         autopilot rejects an item, BackendError after ``command_retries`` timeouts, LinkLost, TypeError/ValueError
         for bad input (nothing is sent then)."""
         items, built = self._mission_items(mission, takeoff_altitude, final_action)
@@ -174,9 +169,10 @@ class AutopilotMission:
                 self._uploaded, self._started, self._live, self._seq = True, False, False, -1
             self._transfers.upload_mission(wire)
             stored, floats = self._download_items()
-            # positions read back as float32 degrees (MISSION_ITEM) are compared with the sent ones as float32
-            differences = mission_differences([_as_float_degrees(it) for it in sent_items] if floats else sent_items,
-                                              stored)
+            # as this autopilot stores a mission (ArduPilot: altitudes in whole centimetres, hold times in whole
+            # seconds); positions read back as float32 degrees (MISSION_ITEM) within float32 precision
+            differences = mission_differences(sent_items, stored, autopilot=self._link.autopilot,
+                                              float_positions=floats)
             flight = [d for d in differences if d.flight]
             if not flight:
                 break
@@ -184,11 +180,24 @@ class AutopilotMission:
                 self._event("mission_replaced", count=len(sent_items), stored=len(stored),
                             differences=[str(d) for d in flight[:5]])
         else:
+            # never leave a mission other than the one sent where AUTO / MISSION would fly it
+            cleared = self._clear_after_mismatch()
             raise BackendError("the mission read back differs from the one sent: "
-                               + "; ".join(str(d) for d in flight[:5]) + "; not started")
+                               + "; ".join(str(d) for d in flight[:5]) + "; not started"
+                               + ("; the vehicle's mission cleared" if cleared else
+                                  "; clearing the vehicle's mission failed: it still holds the one read back"))
         self._remember_waypoints(wire)
-        self._event("mission_uploaded", count=len(sent_items), fields_not_kept=[str(d) for d in differences])
+        self._event("mission_uploaded", count=len(sent_items),
+                    fields_not_kept=[d.explained() for d in differences])
         return sent_items
+
+    def _clear_after_mismatch(self) -> bool:
+        """MISSION_CLEAR_ALL after a read-back that still differs; True when the vehicle acknowledged it."""
+        try:
+            self.clear()
+        except BackendError:  # CommandRefused and LinkLost are BackendErrors: the caller reports the mismatch
+            return False
+        return True
 
     def _wire_items(self, items: list[MissionItem], built: bool,
                     absolute: bool) -> tuple[list[tuple], list[MissionItem]]:

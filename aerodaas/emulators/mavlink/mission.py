@@ -1,6 +1,7 @@
 """The mission protocol, vehicle side (MISSION_COUNT / MISSION_REQUEST(_INT) / MISSION_ITEM(_INT) / MISSION_ACK; mavlink.io/en/services/mission.html)."""
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -18,6 +19,11 @@ if TYPE_CHECKING:
 M = mavlink
 
 __all__ = ["MissionProtocol"]
+def _f32(v: float) -> float:
+    """``v`` rounded to a C float (float32)."""
+    return struct.unpack("f", struct.pack("f", v))[0]
+
+
 #: the mission commands with a position (the others: NAV_RETURN_TO_LAUNCH, DO_CHANGE_SPEED)
 _POSITION_COMMANDS = _NAV_COMMANDS - {M.MAV_CMD_NAV_RETURN_TO_LAUNCH}
 
@@ -184,6 +190,8 @@ class MissionProtocol:
                 # and x/y/z 0 (AP_Mission::mission_cmd_to_mavlink_int)
                 msg = self._enc.mission_item_int_encode(0, 0, msg.seq, 0, msg.command, msg.current, msg.autocontinue,
                                                         msg.param1, msg.param2, msg.param3, msg.param4, 0, 0, 0.0, 0)
+            elif not st.px4:
+                msg = self._as_ardupilot_stores(msg)
         tr.items.append(msg)
         if len(tr.items) == tr.count:
             self.store.mission = tr.items
@@ -252,6 +260,19 @@ class MissionProtocol:
         self.link.send(self._enc.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(),
                                                   len(self._download_items()), 0), link)
 
+    def _as_ardupilot_stores(self, msg: Any) -> Any:
+        """A MISSION_ITEM_INT with a position as ArduPilot stores it (``AP_Mission::mavlink_int_to_mission_cmd``):
+        the altitude in whole centimetres (an int32 of ``packet.z * 100.0f``, truncated, read back as
+        ``alt * 0.01f``); a NAV_WAYPOINT's hold time and a NAV_LOITER_TIME's time in whole seconds (``cmd.p1 =
+        packet.param1``, a uint16)."""
+        alt_cm = int(_f32(_f32(msg.z) * 100.0))  # C's float to int32: truncated toward zero
+        p1 = msg.param1
+        if msg.command in (M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_TIME) and 0.0 <= p1 < 65536.0:
+            p1 = float(int(p1))
+        return self._enc.mission_item_int_encode(0, 0, msg.seq, msg.frame, msg.command, msg.current, msg.autocontinue,
+                                                 p1, msg.param2, msg.param3, msg.param4, msg.x, msg.y,
+                                                 _f32(_f32(alt_cm) * _f32(0.01)), 0)
+
     def _send_item(self, link: _Link, msg: Any, as_int: bool) -> None:
         mtype = getattr(msg, "mission_type", 0)
         items = list(self.store.typed_items(mtype)) if mtype in _TYPED else self._download_items()
@@ -266,10 +287,18 @@ class MissionProtocol:
                                                     it.command, cur, it.autocontinue, it.param1, it.param2, it.param3,
                                                     it.param4, it.x, it.y, it.z, mtype)
         else:
-            k = 1e-7 if it.frame in _GLOBAL_FRAMES else 1.0
+            # float degrees as each firmware computes them: ArduPilot in float32 (``mission_cmd_to_mavlink``:
+            # ``cmd.content.location.lat * 1.0e-7f``, the int32 made a float first), PX4 in double
+            # (``MavlinkMissionManager::format_mavlink_mission_item``: ``mission_item->lat``, a double)
+            if it.frame not in _GLOBAL_FRAMES:
+                x, y = float(it.x), float(it.y)
+            elif self.state.px4:
+                x, y = it.x * 1e-7, it.y * 1e-7
+            else:
+                x, y = _f32(_f32(it.x) * _f32(1.0e-7)), _f32(_f32(it.y) * _f32(1.0e-7))
             out = self._enc.mission_item_encode(msg.get_srcSystem(), msg.get_srcComponent(), msg.seq, it.frame,
                                                 it.command, cur, it.autocontinue, it.param1, it.param2, it.param3,
-                                                it.param4, it.x * k, it.y * k, it.z, mtype)
+                                                it.param4, x, y, it.z, mtype)
         self.link.send(out, link)
 
     def on_mission_request_int(self, link: _Link, msg: Any) -> None:
