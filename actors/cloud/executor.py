@@ -28,8 +28,11 @@ from aerodaas.actors.host.remote import LazyActorClass, where
 
 __all__ = ["CloudExecutor", "CloudExecutorActor", "cloud_selector", "start_cloud_executors"]
 
-#: how many of a client's latest request keys an executor remembers, so that a batch sent again runs once (a
-#: client's keys only repeat within the few batches of a Ray call's retry, seconds apart)
+#: how long (s) an executor remembers a client's request key, so that a batch sent again runs once: a client sends
+#: a batch again only while its tasks are in flight there (0.2 s after a call Ray could not deliver; a task is given up
+#: on by its client 10 s after its deadline), so the keys of a client that stopped are forgotten after this
+_ACCEPTED_FOR_S = 120.0
+#: at most this many keys per client (the oldest forgotten first): the memory bound of a fast client (about 8 MB)
 _ACCEPTED_KEPT = 65_536
 
 
@@ -74,8 +77,9 @@ class CloudExecutor:
             self._prepare_threads(int(threads))
         self._ready: dict[str, list[dict]] = defaultdict(list)
         self._unacked: dict[str, dict[int, dict]] = defaultdict(dict)  # client -> key -> reply handed out
-        #: client -> the keys of its latest requests (at most _ACCEPTED_KEPT): a request sent again is not run twice
-        self._accepted: dict[str, OrderedDict[int, None]] = defaultdict(OrderedDict)
+        #: client -> key -> arrival (time.monotonic()) of its requests of the last _ACCEPTED_FOR_S seconds (at most
+        #: _ACCEPTED_KEPT): a request sent again is not run twice
+        self._accepted: dict[str, OrderedDict[int, float]] = defaultdict(OrderedDict)
         self._events: dict[str, asyncio.Event] = {}
         self._handles: dict[str, set] = defaultdict(set)
         self.executed = 0
@@ -116,22 +120,33 @@ class CloudExecutor:
         return {"name": self.name, "mode": self.mode, **where()}
 
     async def submit(self, client: str, reqs: list[dict]) -> int:
-        """Accept a batch of requests from ``client``; returns how many were new. A request whose key (``k``) is
-        among the client's latest :data:`_ACCEPTED_KEPT` is ignored: the client sends a batch again when Ray could
-        not tell whether the first call arrived (``ActorUnavailableError``: "may or may not have been executed")."""
+        """Accept a batch of requests from ``client``; returns how many were new. A request whose key (``k``) the
+        client sent within :data:`_ACCEPTED_FOR_S` (its latest :data:`_ACCEPTED_KEPT`) is ignored: the client sends a
+        batch again when Ray could not tell whether the first call arrived (``ActorUnavailableError``: "may or may
+        not have been executed"). A key is remembered once its request was taken (a request that raised is not)."""
         loop = self._loop = asyncio.get_running_loop()
-        wall, lt = time.time(), loop.time()
+        wall, lt, now = time.time(), loop.time(), time.monotonic()
+        self._forget_accepted(now - _ACCEPTED_FOR_S)
         accepted = self._accepted[client]
         new = 0
         for req in reqs:  # arrival: the re-check comes before the emulated uplink (see the module docstring)
             if req["k"] in accepted:
                 continue
-            accepted[req["k"]] = None
+            self._arrive(client, req, loop, wall, lt)
+            accepted[req["k"]] = now
             if len(accepted) > _ACCEPTED_KEPT:
                 accepted.popitem(last=False)
-            self._arrive(client, req, loop, wall, lt)
             new += 1
         return new
+
+    def _forget_accepted(self, before: float) -> None:
+        """Forget the request keys that arrived before monotonic time ``before``, and the clients left with none."""
+        for client in list(self._accepted):
+            keys = self._accepted[client]
+            while keys and next(iter(keys.values())) < before:
+                keys.popitem(last=False)
+            if not keys:
+                del self._accepted[client]
 
     async def collect(self, client: str, max_wait_s: float = 5.0,
                       ack: Sequence[int] | None = None) -> list[dict]:

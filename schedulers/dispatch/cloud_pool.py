@@ -69,6 +69,14 @@ def _temporarily_unavailable(e: BaseException) -> bool:
     return isinstance(e, ActorUnavailableError)
 
 
+def _actor_died(e: BaseException) -> bool:
+    """Whether ``e`` is Ray's ``RayActorError`` (the actor died: ``ActorDiedError`` and its kin), which the
+    executor's collector sees too."""
+    from ray.exceptions import ActorUnavailableError, RayActorError  # lazy: heavy ray; only on an error
+
+    return isinstance(e, RayActorError) and not isinstance(e, ActorUnavailableError)
+
+
 class CloudClient(Protocol):
     """What the pool needs of a dispatcher that sends it tasks
     (:class:`~aerodaas.schedulers.dispatch.dispatcher.AnalyticsDispatcher` is one; the pool does not import it,
@@ -156,6 +164,10 @@ class CloudPool:
         self._rr = itertools.count()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._tasks: list[asyncio.Task] = []
+        #: the submit calls being awaited (:meth:`_submitted`): kept (asyncio holds only weak references to a task)
+        #: and cancelled by :meth:`close`, which also stops any new send (``_closing``)
+        self._submits: set[asyncio.Task] = set()
+        self._closing = False
         self._encoder: concurrent.futures.ThreadPoolExecutor | None = None
         self.sent = 0
         self.retried = 0
@@ -196,10 +208,12 @@ class CloudPool:
             self._encoder = concurrent.futures.ThreadPoolExecutor(2, thread_name_prefix="jpeg")
 
     async def close(self) -> None:
-        """Stop collecting and forget this client's work on the executors that are still alive."""
-        for t in self._tasks:
+        """Stop sending and collecting, and forget this client's work on the executors that are still alive."""
+        self._closing = True
+        tasks = [*self._tasks, *self._submits]
+        for t in tasks:
             t.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
+        await asyncio.gather(*tasks, return_exceptions=True)
         self._tasks.clear()
         await asyncio.gather(*(self._call(i, "reset", self.client) for i in range(len(self.executors))
                                if self.alive[i]), return_exceptions=True)
@@ -314,6 +328,8 @@ class CloudPool:
         return buf.tobytes()
 
     def _queue(self, i: int, req: dict) -> None:
+        if self._closing:  # closed: the executors forget this client (reset); nothing is sent after that
+            return
         self._outbox[i].append(req)
         if not self._flush_scheduled:
             self._flush_scheduled = True
@@ -334,26 +350,39 @@ class CloudPool:
                 continue
             ex = self.executors[i]
             call = ex.submit.remote(self.client, reqs) if self._is_actor(ex) else ex.submit(self.client, reqs)
-            self._loop.create_task(self._submitted(i, reqs, call))
+            t = self._loop.create_task(self._submitted(i, reqs, call))
+            self._submits.add(t)
+            t.add_done_callback(self._submits.discard)
 
     async def _submitted(self, i: int, reqs: list[dict], call: Any) -> None:
         """Wait for executor ``i`` to accept ``reqs`` (``call``: its ``submit`` call, a Ray ObjectRef or a
         coroutine). A call Ray could not deliver for certain (``ActorUnavailableError``: "may or may not have been
         executed") is sent again 0.2 s later while the requests' tasks are still in flight there; the executor
-        runs a request it already has only once. Any other failure is the executor's death, which its collector
-        sees and handles (the tasks in flight retried or failed, :meth:`_executor_died`)."""
+        runs a request it already has only once. The executor's death (Ray's ``RayActorError``) is left to its
+        collector, which retries or fails every task in flight there (:meth:`_executor_died`); any other failure (the
+        executor raised while taking the batch) is logged and the batch's tasks still in flight there are retried
+        elsewhere or failed (:meth:`_reroute_or_fail`), instead of waiting for the watchdog."""
         try:
             await call
         except asyncio.CancelledError:
             raise
         except Exception as e:
-            if not _temporarily_unavailable(e):
+            if _temporarily_unavailable(e):
+                await asyncio.sleep(0.2)
+                for r in reqs:
+                    f = self._inflight.get(r["k"])
+                    if f is not None and f.executor == i:
+                        self._queue(i, r)
                 return
-            await asyncio.sleep(0.2)
+            if _actor_died(e):
+                return
+            why = f"cloud executor {self.name_of(i)} did not take the task: {type(e).__name__}: " + \
+                (str(e).splitlines()[0] if str(e) else "")
+            log.warning("%s (a batch of %d)", why, len(reqs))
             for r in reqs:
                 f = self._inflight.get(r["k"])
                 if f is not None and f.executor == i:
-                    self._queue(i, r)
+                    self._reroute_or_fail(r["k"], why)
 
     # ---- replies
     async def _collector(self, i: int) -> None:

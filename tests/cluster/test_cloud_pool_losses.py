@@ -198,6 +198,84 @@ def test_a_submit_call_lost_on_the_way_is_sent_again_and_each_task_runs_once(arr
     assert rep["losses"] == [] and rep["in_flight"] == 0 and rep["retried"] == 0
 
 
+class RaisingSubmitExecutor(CloudExecutor):
+    """An in-process cloud executor, alive, whose ``submit`` raises (an error of its own, as a Ray call returns a
+    ``RayTaskError`` for an exception in the actor): it takes no task."""
+
+    async def submit(self, client, reqs):
+        raise ValueError("cannot take the batch")
+
+
+def test_a_batch_an_executor_raises_on_is_retried_elsewhere_not_left_to_the_watchdog():
+    """A live executor whose submit raises: the pool retries the batch's tasks on the other executor at once (both
+    DONE from the cloud) instead of leaving them unanswered until the watchdog fails them 10 s past their
+    deadline; the raising executor stays alive."""
+    w = workload("LIGHT", deadline_ms=60_000.0)
+
+    async def run():
+        bad, good = RaisingSubmitExecutor("c0"), CloudExecutor("c1")
+        pool = CloudPool([bad, good], jitter=Jitter("none"))
+        d = AnalyticsDispatcher(make_analytics_scheduler("CLOUD", w), EmulatedEdgeExecutor(), pool)
+        await d.start()
+        d.submit("d0", "HV")
+        d.submit("d0", "MD")  # round robin: one to each
+        r = await d.finish(5.0)
+        rep = pool.report()
+        await pool.close()
+        return d, r, rep, (await good.stats())["executed"]
+
+    d, r, rep, executed = asyncio.run(run())
+    check_accounting(d, r)
+    assert [(t.state in (TaskState.DONE_ON_TIME, TaskState.DONE_LATE), t.tier) for t in d.tasks()] == \
+        [(True, "cloud")] * 2, [(t.state.value, t.tier, t.reason) for t in d.tasks()]
+    assert executed == 2 and rep["retried"] == 1 and rep["losses"] == [], rep
+    assert [e["alive"] for e in rep["executors"]] == [True, True], rep["executors"]
+
+
+def test_a_closed_pool_sends_nothing_again():
+    """A submit call lost on the way (the batch never arrived), then the pool closed before its resend: the resend
+    is cancelled with it, so the executor, which has forgotten the client, never runs the task."""
+    ex = LostSubmitExecutor("c0")
+    ex.lost, ex.arrived = 1, False
+
+    async def run():
+        pool = CloudPool([ex], jitter=Jitter("none"))
+        d = AnalyticsDispatcher(make_analytics_scheduler("CLOUD", workload("LIGHT", deadline_ms=60_000.0)),
+                                EmulatedEdgeExecutor(), pool)
+        await d.start()
+        d.submit("d0", "HV")
+        while ex.lost:  # the first submit call has failed: its resend waits 0.2 s
+            await asyncio.sleep(0.005)
+        await pool.close()
+        await asyncio.sleep(0.5)
+        return await ex.stats()
+
+    st = asyncio.run(run())
+    assert st["executed"] + st["refused"] == 0, st
+
+
+def test_an_executor_forgets_request_keys_after_its_window(monkeypatch):
+    """A request key is remembered for ``_ACCEPTED_FOR_S``: sent again within it, ignored; after it (a client that
+    stopped, a key long answered), forgotten, with the client's table."""
+    import aerodaas.actors.cloud.executor as executor
+
+    monkeypatch.setattr(executor, "_ACCEPTED_FOR_S", 0.2)
+
+    async def run():
+        ex = CloudExecutor("c0")
+        req = {"model": "HV", "sent": time.time(), "up_ms": 0.0, "down_ms": 0.0, "exec_ms": 1.0, "admit_by": None,
+               "jpeg": None, "meta": None, "lead_ms": 0.0, "k": 1}
+        first, again = await ex.submit("a", [req]), await ex.submit("a", [req])
+        await asyncio.sleep(0.3)
+        other = await ex.submit("b", [req])  # another client's submit forgets what has aged out
+        forgotten = "a" not in ex._accepted
+        later = await ex.submit("a", [req])
+        await ex.reset()
+        return first, again, other, forgotten, later
+
+    assert asyncio.run(run()) == (1, 0, 1, True, 1)
+
+
 def test_the_executor_hands_a_reply_out_again_until_acknowledged():
     """``collect`` with ``ack``: a reply not acknowledged comes again with the next call, an acknowledged one never;
     without ``ack`` each reply is handed out once."""
