@@ -268,10 +268,12 @@ class CloudPool:
         return self.infos[i].get("name") or f"#{i}"
 
     # ---- sending
-    def _pick(self) -> int | None:
+    def _pick(self, avoid: int | None = None) -> int | None:
         """Round robin over the live executors, those Ray can reach first (an unreachable one only when it is all
-        there is: its tasks then wait for it to answer or be counted dead)."""
-        alive = [i for i, a in enumerate(self.alive) if a]
+        there is: its tasks then wait for it to answer or be counted dead), executor ``avoid`` only when it is the
+        only one alive."""
+        alive = [i for i, a in enumerate(self.alive) if a and i != avoid] or \
+            [i for i, a in enumerate(self.alive) if a]
         if not alive:
             return None
         reachable = [i for i in alive if i not in self._unavailable_since] or alive
@@ -382,7 +384,7 @@ class CloudPool:
             for r in reqs:
                 f = self._inflight.get(r["k"])
                 if f is not None and f.executor == i:
-                    self._reroute_or_fail(r["k"], why)
+                    self._reroute_or_fail(r["k"], why, avoid=i)
 
     # ---- replies
     async def _collector(self, i: int) -> None:
@@ -448,15 +450,16 @@ class CloudPool:
         now = f.dispatcher.clock.now_ms()
         f.dispatcher.on_cloud_reply(f.task, {"ok": False, "error": reason, "failed": True}, now - f.sent_ms, None)
 
-    def _reroute_or_fail(self, key: int, why: str) -> str:
-        """Retry ``key`` on a surviving executor if allowed and the policy still admits it; else FAILED."""
+    def _reroute_or_fail(self, key: int, why: str, avoid: int | None = None) -> str:
+        """Retry ``key`` on a surviving executor if allowed and the policy still admits it (executor ``avoid`` only
+        when no other is alive); else FAILED."""
         f = self._inflight.get(key)
         if f is None:
             return "gone"
         d = f.dispatcher
         now = d.clock.now_ms()
         if self.retry and not f.retried and self.available and d.cloud_admits(f.task, now):
-            j = self._pick()
+            j = self._pick(avoid)
             f.executor, f.retried = j, True
             f.req["sent"] = time.time()
             f.req["admit_by"] = None if math.isinf(f.admit_by_ms) else self.clock.epoch(f.admit_by_ms)
