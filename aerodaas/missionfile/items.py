@@ -4,6 +4,7 @@ that ``.plan`` files and survey / corridor-scan ComplexItems hold."""
 from __future__ import annotations
 
 import math
+import struct
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -15,6 +16,12 @@ from aerodaas.missionfile.commands import (COMPLEX_ITEM_COMMAND, MISSION_FRAMES,
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+def float32(v: float) -> float:
+    """``v`` as a MAVLink ``float`` field carries it (IEEE 754 single precision, rounded to nearest), back as a
+    Python float. Raises OverflowError beyond float32's range."""
+    return struct.unpack("<f", struct.pack("<f", v))[0]
 
 
 class MissionItem(_Model):

@@ -23,7 +23,6 @@ flight.
 from __future__ import annotations
 
 import math
-import struct
 from typing import NamedTuple, Sequence
 
 from aerodaas.missionfile._common import _fail
@@ -31,7 +30,7 @@ from aerodaas.missionfile.commands import (MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_
                                            MAV_CMD_NAV_LOITER_UNLIM, MAV_CMD_NAV_RETURN_TO_LAUNCH,
                                            MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT, MAV_FRAME_MISSION,
                                            POSITION_COMMANDS, _RELATIVE_FRAMES, frame_name)
-from aerodaas.missionfile.items import MissionItem
+from aerodaas.missionfile.items import MissionItem, float32
 
 __all__ = ["ItemDifference", "mission_differences", "ardupilot_stored_altitude", "ardupilot_stored_seconds",
            "FLIGHT_PARAMS", "FrameChange", "mission_frames", "SpeedChange",
@@ -95,16 +94,12 @@ def _same(a: float | None, b: float | None, abs_tol: float, rel_tol: float = 0.0
 _ARDUPILOT_WHOLE_SECONDS = frozenset({MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME})
 
 
-def _float32(v: float) -> float:
-    return struct.unpack("f", struct.pack("f", v))[0]
-
-
 def ardupilot_stored_altitude(z_m: float) -> float:
     """The altitude (m) ArduPilot stores for ``z_m`` sent with a position: whole centimetres, truncated toward zero
     (``AP_Mission::mavlink_int_to_mission_cmd``: ``cmd.content.location.alt = packet.z * 100.0f``, an int32, in
     float32 arithmetic), read back as ``alt * 0.01f`` (``mission_cmd_to_mavlink_int``). Source:
     ``libraries/AP_Mission/AP_Mission.cpp``."""
-    return math.trunc(_float32(_float32(z_m) * 100.0)) / 100.0
+    return math.trunc(float32(float32(z_m) * 100.0)) / 100.0
 
 
 def ardupilot_stored_seconds(p: float) -> float:

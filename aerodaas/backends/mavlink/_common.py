@@ -3,10 +3,9 @@ streams requested, :class:`CommandNotConfirmed`, enum names and float32 rounding
 from __future__ import annotations
 
 import logging
-import struct
-
 
 from aerodaas.backends.base import BackendError
+from aerodaas.missionfile.items import float32
 
 
 #: STATUSTEXT lines are logged here (``robot: text``), at the level of their MAV_SEVERITY
@@ -98,6 +97,6 @@ def _f32(v: float | None) -> float | None:
     """Round a parameter to what a float32 MAVLink field carries; NaN/None stay None."""
     if v is None or v != v:
         return None
-    return struct.unpack("<f", struct.pack("<f", float(v)))[0]
+    return float32(float(v))
 
 

@@ -1,7 +1,6 @@
 """The mission protocol, vehicle side (MISSION_COUNT / MISSION_REQUEST(_INT) / MISSION_ITEM(_INT) / MISSION_ACK; mavlink.io/en/services/mission.html)."""
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -12,6 +11,7 @@ from aerodaas.emulators.mavlink.constants import (_GLOBAL_FRAMES, _MISSION_COMMA
 from aerodaas.emulators.mavlink.link import EmulatorLink
 from aerodaas.emulators.mavlink.state import EmulatorState, MissionStore
 from aerodaas.emulators.mavlink.telemetry import Telemetry
+from aerodaas.missionfile.items import float32
 
 if TYPE_CHECKING:
     from aerodaas.emulators.mavlink.link import _Link
@@ -19,11 +19,6 @@ if TYPE_CHECKING:
 M = mavlink
 
 __all__ = ["MissionProtocol"]
-def _f32(v: float) -> float:
-    """``v`` rounded to a C float (float32)."""
-    return struct.unpack("f", struct.pack("f", v))[0]
-
-
 #: the mission commands with a position (the others: NAV_RETURN_TO_LAUNCH, DO_CHANGE_SPEED)
 _POSITION_COMMANDS = _NAV_COMMANDS - {M.MAV_CMD_NAV_RETURN_TO_LAUNCH}
 
@@ -265,13 +260,13 @@ class MissionProtocol:
         the altitude in whole centimetres (an int32 of ``packet.z * 100.0f``, truncated, read back as
         ``alt * 0.01f``); a NAV_WAYPOINT's hold time and a NAV_LOITER_TIME's time in whole seconds (``cmd.p1 =
         packet.param1``, a uint16)."""
-        alt_cm = int(_f32(_f32(msg.z) * 100.0))  # C's float to int32: truncated toward zero
+        alt_cm = int(float32(float32(msg.z) * 100.0))  # C's float to int32: truncated toward zero
         p1 = msg.param1
         if msg.command in (M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_TIME) and 0.0 <= p1 < 65536.0:
             p1 = float(int(p1))
         return self._enc.mission_item_int_encode(0, 0, msg.seq, msg.frame, msg.command, msg.current, msg.autocontinue,
                                                  p1, msg.param2, msg.param3, msg.param4, msg.x, msg.y,
-                                                 _f32(_f32(alt_cm) * _f32(0.01)), 0)
+                                                 float32(float32(alt_cm) * float32(0.01)), 0)
 
     def _send_item(self, link: _Link, msg: Any, as_int: bool) -> None:
         mtype = getattr(msg, "mission_type", 0)
@@ -295,7 +290,7 @@ class MissionProtocol:
             elif self.state.px4:
                 x, y = it.x * 1e-7, it.y * 1e-7
             else:
-                x, y = _f32(_f32(it.x) * _f32(1.0e-7)), _f32(_f32(it.y) * _f32(1.0e-7))
+                x, y = float32(float32(it.x) * float32(1.0e-7)), float32(float32(it.y) * float32(1.0e-7))
             out = self._enc.mission_item_encode(msg.get_srcSystem(), msg.get_srcComponent(), msg.seq, it.frame,
                                                 it.command, cur, it.autocontinue, it.param1, it.param2, it.param3,
                                                 it.param4, x, y, it.z, mtype)
