@@ -272,8 +272,8 @@ class CloudPool:
         """Round robin over the live executors, those Ray can reach first (an unreachable one only when it is all
         there is: its tasks then wait for it to answer or be counted dead), executor ``avoid`` only when it is the
         only one alive."""
-        alive = [i for i, a in enumerate(self.alive) if a and i != avoid] or \
-            [i for i, a in enumerate(self.alive) if a]
+        alive = [i for i, a in enumerate(self.alive) if a]
+        alive = [i for i in alive if i != avoid] or alive
         if not alive:
             return None
         reachable = [i for i in alive if i not in self._unavailable_since] or alive
