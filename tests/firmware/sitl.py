@@ -411,14 +411,14 @@ def _write_env(path: Path, cfg: dict) -> Path:
 
 
 def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] | None = None) -> dict[str, Any]:
-    """The single-vehicle scenarios, each in its own namespace with a freshly booted firmware instance (cold,
-    fresh parameters): the farm survey in GUIDED/OFFBOARD, the same with ``use_autopilot_mission``, ``aerodaas
-    mission upload --start`` (then observed until it lands), the farm survey with a geofence exclusion around one
-    corner (refused before anything flies), and the farm survey while the firmware is stopped for 6 s
-    (SIGSTOP/SIGCONT) in flight; on PX4 also the autopilot mission once more on the same vehicle rebooted
-    (``auto_again``), our drone actor frozen in OFFBOARD (its failsafe) and the survey at
-    0.5 m/s with SIH's ground truth observed (``slow``, :func:`tests.firmware.sitl_watchers.observe_truth`); ``only``: just these of them (by hand). Returns ``{name: {"rc", "out", "rec" or
-    "observed"}}``."""
+    """The single-vehicle scenarios, each in its own namespace with a freshly booted firmware instance (cold, fresh
+    parameters): the farm survey in GUIDED/OFFBOARD, the same with ``use_autopilot_mission``, ``aerodaas mission
+    upload --start`` (then observed until it lands; on PX4 first a mission replaced by another station, ``plan_id``),
+    the farm survey with a geofence exclusion around one corner (refused before anything flies), and the farm survey
+    while the firmware is stopped for 6 s (SIGSTOP/SIGCONT) in flight; on PX4 also the autopilot mission once more on
+    the same vehicle rebooted (``auto_again``), our drone actor frozen in OFFBOARD (its failsafe) and the survey at
+    0.5 m/s with SIH's ground truth observed (``slow``, :func:`tests.firmware.sitl_watchers.observe_truth`);
+    ``only``: just these (by hand). Returns ``{name: {"rc", "out", "rec" or "observed"}}``."""
     from aerodaas.model.geo import enu_to_geodetic
     from aerodaas.model.types import GeoPoint
     from tests.firmware.sitl_mission import mission_file
@@ -451,10 +451,12 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
                f"{shlex.quote(str(workdir / 'failsafe_modes.json'))} 3 3 "
                f"> {shlex.quote(str(workdir / 'freezer.log'))} 2>&1 & ) ; ")
     # every scenario on a vehicle booted for it (the farm survey is relative to where the vehicle takes off)
+    plan_id = (f"{py} -m tests.firmware.sitl_plan_id {conn} {monitor_connection(autopilot)} {FARM_HOME['lat']} "
+               f"{FARM_HOME['lon']} {FARM_HOME['alt']} {shlex.quote(str(workdir / 'plan_id.json'))} ; ")
     scenarios = {
         "guided": [survey_step(autopilot, env_guided, workdir / "guided.mcap")],
         "auto": [survey_step(autopilot, env_auto, workdir / "auto.mcap")],
-        "upload": [observe + upload, observed],
+        "upload": [(plan_id if autopilot == "px4" else "") + observe + upload, observed],
         "fence": [survey_step(autopilot, env_fence, workdir / "fence.mcap")],
         "linkloss": [stopper + survey_step(autopilot, env_guided, workdir / "linkloss.mcap")],
     }
@@ -493,12 +495,13 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     for name in ("slow", "guided", "auto", "linkloss"):
         if name in out and (workdir / f"truth_{name}.json").exists():
             out[name]["truth"] = json.loads((workdir / f"truth_{name}.json").read_text())
-    modes = workdir / "failsafe_modes.json"
     if "failsafe" in out:
+        modes = workdir / "failsafe_modes.json"
         out["failsafe"]["firmware"] = json.loads(modes.read_text()) if modes.exists() else {}
-    obs = workdir / "observed.json"
+    obs, plan = workdir / "observed.json", workdir / "plan_id.json"
     if "observe" in out:
         out["observe"]["observed"] = json.loads(obs.read_text()) if obs.exists() else {}
+        out["plan_id"] = json.loads(plan.read_text()) if plan.exists() else {}
     return out
 
 
@@ -584,11 +587,8 @@ def router_fleet_session(autopilot: str, workdir: Path, n: int = 3) -> dict[str,
 
 
 def _udp_counters(snmp: Path) -> dict[str, int]:
-    """The namespace's UDP counters after the run (``/proc/net/snmp``'s ``Udp:`` lines: InErrors, RcvbufErrors
-    ...), {} when not written."""
-    if not snmp.exists():
-        return {}
-    rows = [line.split()[1:] for line in snmp.read_text().splitlines() if line.startswith("Udp:")]
+    """The namespace's UDP counters after the run (``/proc/net/snmp``'s ``Udp:`` lines), {} when not written."""
+    rows = [line.split()[1:] for line in snmp.read_text().splitlines() if line.startswith("Udp:")] if snmp.exists() else []
     return dict(zip(rows[0], map(int, rows[1]))) if len(rows) >= 2 else {}
 
 

@@ -88,3 +88,17 @@ def test_a_px4_rebooted_with_its_last_mission_flies_the_new_one(session):
     reached = [e for e in ev if e["event"] == "waypoint_reached"]
     # within PX4's own default acceptance radius (NAV_ACC_RAD 2 m); the stored mission's report made them 10-14 m
     assert len(reached) == 4 and all(e["error_m"] <= 2.0 for e in reached), reached
+
+
+def test_a_mission_another_station_replaced_after_our_upload_is_not_started(session):
+    """Our backend uploads a mission (read back, the same), then a second ground station uploads another on PX4's
+    ground-station link: the start refuses before it sends anything, naming both plan ids, which are the firmware's
+    own (its MISSION_ACKs' opaque_id and the MISSION_CURRENT the other station saw). The upload scenario after it
+    (``aerodaas mission upload --start``, the same check) starts and flies."""
+    got = session["plan_id"]
+    ours, theirs = got.get("ours"), got.get("theirs", {})
+    assert ours and theirs.get("ack_type") == 0 and theirs["ack_id"] not in (0, ours), got
+    assert theirs["current_id"] == theirs["ack_id"], got  # the firmware reports the other station's mission
+    assert got["start"].endswith(f"the vehicle reports mission id {theirs['ack_id']}, not {ours}, the id it gave the "
+                                 f"mission uploaded: another mission replaced it; not started (upload the mission "
+                                 f"again)"), got

@@ -486,15 +486,15 @@ def test_a_reached_item_makes_the_next_one_current_when_mission_current_is_lost(
 
     at(1000, 0.0, 0.1, 1.5)
     with b._lock:
-        b.mission.on_mission_current(NS(seq=0))
+        b.mission.on_mission_current(M.MAVLink_mission_current_message(0))
         b.mission.on_mission_item_reached(NS(seq=0))  # take-off done: waypoint 1 (here) is current, its hold begins
-        b.mission.on_mission_current(NS(seq=0))  # stale, sent before the reached one
+        b.mission.on_mission_current(M.MAVLink_mission_current_message(0))  # stale, sent before the reached one
         b.mission.on_mission_item_reached(NS(seq=0))  # PX4's repeats
         at(2000, 0.0, 9.8, 1.5)
         b.mission.on_mission_item_reached(NS(seq=1))  # hold over: waypoint 2 current, and we are there
-        b.mission.on_mission_current(NS(seq=2))
+        b.mission.on_mission_current(M.MAVLink_mission_current_message(2))
         b.mission.on_mission_item_reached(NS(seq=2))
-        b.mission.on_mission_current(NS(seq=3))
+        b.mission.on_mission_current(M.MAVLink_mission_current_message(3))
     ev = [(e["event"], e.get("seq")) for e in b.drain_events()]
     assert ev == [("mission_current", 0), ("mission_item_reached", 0), ("mission_current", 1),
                   ("mission_item_reached", 1), ("mission_item_hold_done", 1), ("mission_current", 2),
@@ -520,16 +520,16 @@ def test_after_the_start_only_a_report_of_the_running_mission_is_progress():
     b.mission._uploaded = b.mission._started = True  # the state after upload() and start(): nothing reported yet
     b.drain_events()
     with b._lock:
-        b.mission.on_mission_current(NS(seq=5, mission_state=M.MISSION_STATE_NO_MISSION))
-        b.mission.on_mission_current(NS(seq=5, mission_state=0))  # no state, and not in the mission mode
+        b.mission.on_mission_current(M.MAVLink_mission_current_message(5, 0, M.MISSION_STATE_NO_MISSION))
+        b.mission.on_mission_current(M.MAVLink_mission_current_message(5, 0, 0))  # no state, not in the mission mode
         b.mission.on_mission_item_reached(NS(seq=4))
     assert [e for e in b.drain_events() if e["event"].startswith("mission_")] == []
     with b._lock:
-        b.mission.on_mission_current(NS(seq=0, mission_state=M.MISSION_STATE_ACTIVE))
+        b.mission.on_mission_current(M.MAVLink_mission_current_message(0, 0, M.MISSION_STATE_ACTIVE))
         b.mission.on_mission_item_reached(NS(seq=0))
     heartbeat(4, 3)  # paused in LOITER: the running mission's reports stay its progress
     with b._lock:
-        b.mission.on_mission_current(NS(seq=1, mission_state=M.MISSION_STATE_PAUSED))
+        b.mission.on_mission_current(M.MAVLink_mission_current_message(1, 0, M.MISSION_STATE_PAUSED))
     ev = [(e["event"], e.get("seq")) for e in b.drain_events() if e["event"].startswith("mission_")]
     assert ev == [("mission_current", 0), ("mission_item_reached", 0), ("mission_current", 1)], ev
 

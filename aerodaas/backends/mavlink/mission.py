@@ -10,6 +10,7 @@ from typing import Any, Callable, Literal
 from aerodaas.model.geo import geodetic_to_enu
 from aerodaas.backends.base import BackendError
 from aerodaas.missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
+from aerodaas.missionfile.plan_ids import plan_id
 from aerodaas.missionfile.upload import mission_differences
 from aerodaas.model.types import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.backends.mavlink._common import M, _f32, _GLOBAL_FRAMES
@@ -28,6 +29,9 @@ _RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE
 #: horizontal metres from a mission waypoint at which the vehicle counts as arrived (its hold begins): ArduPilot at
 #: most this, PX4 the item's own acceptance radius (see AutopilotMission._remember_waypoints); without one, this
 _ARRIVAL_RADIUS_M = 0.5
+#: wall seconds the start waits for a MISSION_CURRENT that reports the uploaded mission's id: three of the 1 Hz
+#: (vehicle time) we ask for (_common.py); PX4 sends one at once after an accepted upload
+_PLAN_ID_WAIT_S = 3.0
 
 
 def reports_the_running_mission(mission_state: int, mode: str) -> bool:
@@ -91,6 +95,9 @@ class AutopilotMission:
         self._uploaded = False  # we uploaded a mission: only our start() makes the reports its progress
         self._started = False  # start() was called since the last upload
         self._live = False  # ... and a MISSION_CURRENT said the mission runs: the reports are its progress
+        self._plan_id = 0  # the id the vehicle gave our uploaded mission (MISSION_ACK.opaque_id); 0: none given
+        self._reported_plan_id = 0  # the id in the latest MISSION_CURRENT (mission_id)
+        self._plan_confirmed = threading.Event()  # the latest MISSION_CURRENT reports _plan_id
         link.handle("MISSION_CURRENT", self.on_mission_current)
         link.handle("MISSION_ITEM_REACHED", self.on_mission_item_reached)
         telemetry.notify_positions(self)
@@ -149,7 +156,8 @@ class AutopilotMission:
         replaces the count just stored). A value ArduPilot stores at its own precision (an altitude in whole
         centimetres, a hold time in whole seconds) is the same flight. Event ``mission_uploaded``: ``count`` and
         ``fields_not_kept`` (each field the vehicle stores differently without changing the flight, said as text
-        with why: not kept, or kept at the autopilot's precision).
+        with why: not kept, or kept at the autopilot's precision), ``mission_id`` (the plan id the vehicle gave the
+        mission, :mod:`~aerodaas.missionfile.plan_ids`; 0: none given), which :meth:`start` checks.
 
         Returns the items as sent (``seq`` from 1; latitude/longitude rounded to 1e-7 degrees, params to float32),
         which :meth:`download` returns unchanged. Raises BackendError when the read-back of the second upload
@@ -167,7 +175,13 @@ class AutopilotMission:
         for attempt in (1, 2):
             with self._lock:  # closed before the transfer: the vehicle may announce the new mission with its ACK
                 self._uploaded, self._started, self._live, self._seq = True, False, False, -1
-            self._transfers.upload_mission(wire)
+                self._plan_id = 0
+                self._plan_confirmed.clear()
+            given = self._transfers.upload_mission(wire)
+            with self._lock:
+                self._plan_id = given
+                if given and self._reported_plan_id == given:
+                    self._plan_confirmed.set()
             stored, floats = self._download_items()
             # as this autopilot stores a mission (ArduPilot: altitudes in whole centimetres, hold times in whole
             # seconds); positions read back as float32 degrees (MISSION_ITEM) within float32 precision
@@ -187,7 +201,7 @@ class AutopilotMission:
                                + ("; the vehicle's mission cleared" if cleared else
                                   "; clearing the vehicle's mission failed: it still holds the one read back"))
         self._remember_waypoints(wire)
-        self._event("mission_uploaded", count=len(sent_items),
+        self._event("mission_uploaded", count=len(sent_items), mission_id=given,
                     fields_not_kept=[d.explained() for d in differences])
         return sent_items
 
@@ -296,6 +310,9 @@ class AutopilotMission:
 
     def clear(self) -> None:
         """MISSION_CLEAR_ALL; waits for MISSION_ACK. Raises CommandRefused / BackendError / LinkLost."""
+        with self._lock:
+            self._plan_id = 0
+            self._plan_confirmed.clear()
         self._transfers.clear_mission()
 
     def start(self) -> None:
@@ -304,8 +321,11 @@ class AutopilotMission:
         takes off by itself). Our target stream stops first, and the vehicle is ours to bring down
         (:attr:`OffboardControl.in_control`). Progress arrives as ``mission_current`` / ``mission_item_reached``
         events. Raises CredentialsRefused on an unsigned link when ``mavlink.require_signing``
-        (:class:`SignedOnly`); as :meth:`CommandProtocol.command_long` / :meth:`CommandProtocol.set_mode`."""
+        (:class:`SignedOnly`); BackendError when the vehicle holds another mission than the one uploaded
+        (:meth:`_check_plan_id`; nothing is sent); as :meth:`CommandProtocol.command_long` /
+        :meth:`CommandProtocol.set_mode`."""
         self._signed.require("start_mission")
+        self._check_plan_id()
         with self._lock:  # a resume (start again without a new upload) keeps the progress it has
             self._started = True
         self._offboard.stop()
@@ -314,6 +334,22 @@ class AutopilotMission:
             self._commands.set_mode("MISSION" if self._link.autopilot == "px4" else "AUTO")
         else:
             self._commands.command_long("mission start", M.MAV_CMD_MISSION_START, 0, 0)
+
+    def _check_plan_id(self) -> None:
+        """Where the vehicle gave our uploaded mission a plan id (PX4: MISSION_ACK.opaque_id), its MISSION_CURRENT
+        must report that id (``mission_id``) before the start: PX4 can replace a mission it accepted and we read
+        back (a mission state its navigator publishes with another id, ``MavlinkMissionManager::
+        check_active_mission``; a ground station's upload), and MISSION_START / AUTO.MISSION would fly that one.
+        Waits up to :data:`_PLAN_ID_WAIT_S` for such a report. Raises BackendError naming both ids otherwise."""
+        with self._lock:
+            ours = self._plan_id
+        if not ours or self._plan_confirmed.wait(_PLAN_ID_WAIT_S):
+            return
+        with self._lock:
+            reported = self._reported_plan_id
+        raise BackendError(f"robot {self.robot_id!r}: start_mission: the vehicle reports mission id {reported}, not "
+                           f"{ours}, the id it gave the mission uploaded: another mission replaced it; not started "
+                           f"(upload the mission again)")
 
     # ------------------------------------------------------------------ progress (the I/O thread, under the lock)
     def on_position(self) -> None:
@@ -324,7 +360,12 @@ class AutopilotMission:
 
     def on_mission_current(self, msg: Any) -> None:
         """MISSION_CURRENT: the autopilot's current item, from the first one that says the started mission runs
-        (see the class). Caller holds the backend's lock (the I/O thread)."""
+        (see the class); its plan id for :meth:`_check_plan_id`. Caller holds the backend's lock (the I/O thread)."""
+        self._reported_plan_id = plan_id(msg)
+        if self._plan_id and self._reported_plan_id == self._plan_id:
+            self._plan_confirmed.set()
+        else:
+            self._plan_confirmed.clear()
         if not self._live:
             ours = self._started or not self._uploaded
             if not (ours and reports_the_running_mission(getattr(msg, "mission_state", 0) or 0, self._link.mode)):

@@ -12,6 +12,7 @@ from aerodaas.backends.base import BackendError, CommandRefused
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32
 from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink.statustext import StatusTexts
+from aerodaas.missionfile.plan_ids import plan_id
 
 __all__ = ["MissionTransfer", "FENCE", "RALLY", "Wire"]
 
@@ -47,9 +48,11 @@ class MissionTransfer:
         if self._active and getattr(msg, "target_system", 0) in (0, self._settings.source_system):
             self._queue.put(msg)
 
-    def upload_mission(self, wire: list[tuple]) -> None:
-        """The upload transfer of the mission's ``wire`` items (frame, command, autocontinue, param1-4, x, y, z) (MISSION_COUNT, each item as the autopilot requests it, until
-        its MISSION_ACK). Raises CommandRefused for a refusing MISSION_ACK."""
+    def upload_mission(self, wire: list[tuple]) -> int:
+        """The upload transfer of the mission's ``wire`` items (frame, command, autocontinue, param1-4, x, y, z)
+        (MISSION_COUNT, each item as the autopilot requests it, until its MISSION_ACK). Returns the accepting
+        MISSION_ACK's plan id (:func:`~aerodaas.missionfile.plan_ids.plan_id`; 0: the vehicle gives none). Raises
+        CommandRefused for a refusing MISSION_ACK."""
         n = len(wire)
 
         def send_item(seq: int, as_int: bool) -> None:
@@ -83,10 +86,11 @@ class MissionTransfer:
                 if msg.type != M.MAV_MISSION_ACCEPTED:
                     raise CommandRefused(self.robot_id, "mission upload", _enum_name("MAV_MISSION_RESULT", msg.type),
                                          self._texts.since(state["start"]))
+                state["plan_id"] = plan_id(msg)
                 return state["max"] == n - 1 or n == 0
             return False
 
-        self._transaction("mission upload", lambda: resend(None), resend, on_msg)
+        return self._transaction("mission upload", lambda: resend(None), resend, on_msg).get("plan_id", 0)
 
     def _transaction(self, name: str, begin: Callable[[], None], resend: Callable[[Any], None],
                      on_msg: Callable[[Any, dict], bool]) -> dict:

@@ -12,6 +12,7 @@ from aerodaas.emulators.mavlink.link import EmulatorLink
 from aerodaas.emulators.mavlink.state import EmulatorState, MissionStore
 from aerodaas.emulators.mavlink.telemetry import Telemetry
 from aerodaas.missionfile.items import float32
+from aerodaas.missionfile.plan_ids import with_plan_id
 
 if TYPE_CHECKING:
     from aerodaas.emulators.mavlink.link import _Link
@@ -87,8 +88,11 @@ class MissionProtocol:
         return self._enc.mission_item_int_encode(0, 0, 0, M.MAV_FRAME_GLOBAL, M.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0, 0,
                                                  int(round(h.lat * 1e7)), int(round(h.lon * 1e7)), float(h.alt), 0)
 
-    def _mission_ack(self, link: _Link, sysid: int, compid: int, result: int, mission_type: int = 0) -> None:
-        self.link.send(self._enc.mission_ack_encode(sysid, compid, result, mission_type), link)
+    def _mission_ack(self, link: _Link, sysid: int, compid: int, result: int, mission_type: int = 0,
+                     plan_id: int = 0) -> None:
+        """MISSION_ACK; ``plan_id``: the new mission's id (``opaque_id``), which PX4 answers an upload with."""
+        ack = self._enc.mission_ack_encode(sysid, compid, result, mission_type)
+        self.link.send(with_plan_id(ack, plan_id) if plan_id else ack, link)
 
     def on_mission_count(self, link: _Link, msg: Any) -> None:
         """MISSION_COUNT: an upload starts (count 0 clears; over 700 items: NO_SPACE; an unknown mission type:
@@ -195,7 +199,7 @@ class MissionProtocol:
             self.store.seq = 0 if st.px4 else min(1, len(self.store.mission) - 1)
             self.store.run_state = "idle"
             self._transfer = None
-            self._mission_ack(link, tr.sysid, tr.compid, M.MAV_MISSION_ACCEPTED)
+            self._mission_ack(link, tr.sysid, tr.compid, M.MAV_MISSION_ACCEPTED, plan_id=self.store.mission_id())
             self.link.text(M.MAV_SEVERITY_INFO, f"Flight plan received ({tr.count} items)")
             self.telemetry.emit(M.MAVLINK_MSG_ID_MISSION_CURRENT)
         else:
@@ -252,8 +256,10 @@ class MissionProtocol:
             self.link.send(self._enc.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0,
                                                       msg.mission_type), link)
             return
-        self.link.send(self._enc.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(),
-                                                  len(self._download_items()), 0), link)
+        count = self._enc.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(),
+                                               len(self._download_items()), 0)
+        plan_id = self.store.mission_id()  # PX4 answers a download with the stored mission's id
+        self.link.send(with_plan_id(count, plan_id) if plan_id else count, link)
 
     def _as_ardupilot_stores(self, msg: Any) -> Any:
         """A MISSION_ITEM_INT with a position as ArduPilot stores it (``AP_Mission::mavlink_int_to_mission_cmd``):

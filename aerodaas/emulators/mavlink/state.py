@@ -8,6 +8,8 @@ Readiness as the firmware defines it is documented in :mod:`.arming`; frames in 
 from __future__ import annotations
 
 import math
+import struct
+import zlib
 from collections import deque
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -279,6 +281,17 @@ class MissionStore:
         self.item_target = np.zeros(3)  # ENU target of the mission item being flown
         #: MISSION_ITEM_REACHED sequence numbers sent, in order
         self.reached_log: list[int] = []
+
+    def mission_id(self) -> int:
+        """The stored mission's plan id (:mod:`aerodaas.missionfile.plan_ids`): PX4's is a CRC32 of its items
+        (0 without items), so a mission that replaces the stored one has another id; ArduPilot gives none (0)."""
+        if not self.px4 or not self.mission:
+            return 0
+        crc = 0
+        for it in self.mission:
+            crc = zlib.crc32(struct.pack("<HBBffffiif", it.command, it.frame, it.autocontinue, it.param1, it.param2,
+                                         it.param3, it.param4, it.x, it.y, it.z), crc)
+        return crc or 1
 
     def nav_items(self) -> list[int]:
         """Sequence numbers of the navigation items (ArduPilot's home item 0 excluded)."""

@@ -15,6 +15,7 @@ from aerodaas.emulators.mavlink.flavour import EKF_STATUS_REPORT_ID
 from aerodaas.emulators.mavlink.gimbal import EmulatedGimbal
 from aerodaas.emulators.mavlink.link import EmulatorLink
 from aerodaas.emulators.mavlink.state import EmulatorState, MissionStore
+from aerodaas.missionfile.plan_ids import with_plan_id
 
 if TYPE_CHECKING:
     from aerodaas.emulators.mavlink.link import _Link
@@ -213,8 +214,10 @@ class Telemetry:
                 state = M.MISSION_STATE_PAUSED
             else:
                 state = M.MISSION_STATE_NOT_STARTED
-            return e.mission_current_encode(min(store.seq, max(0, len(store.mission) - 1)), len(store.mission), state,
-                                            1 if in_mission else (2 if st.px4 else 0))
+            current = e.mission_current_encode(min(store.seq, max(0, len(store.mission) - 1)), len(store.mission),
+                                               state, 1 if in_mission else (2 if st.px4 else 0))
+            plan_id = store.mission_id()  # PX4 reports its stored mission's id; ArduPilot none
+            return with_plan_id(current, plan_id) if plan_id else current
         if msg_id == M.MAVLINK_MSG_ID_VFR_HUD:
             v = float(np.hypot(s.velocity[0], s.velocity[1]))
             return e.vfr_hud_encode(v, v, int(st.heading()), 50 if s.in_air else 0, float(st.geo().alt),
