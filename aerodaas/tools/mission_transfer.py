@@ -230,7 +230,11 @@ def _upload(request: Upload, name: str, opened: list) -> None:
     _report_upload(backend, sent, name, repr(str(path)), request.link.connection)
     if request.start:
         backend.actions.arm()
-        backend.mission.start()
+        try:
+            backend.mission.start()
+        except BackendError:  # e.g. the vehicle holds another mission now: armed by us, not left armed on the ground
+            backend.actions.disarm()
+            raise
         print(f"{name}: armed and started the mission (ArduPilot AUTO / PX4 AUTO.MISSION)", flush=True)
 
 

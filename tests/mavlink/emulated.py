@@ -6,6 +6,7 @@ import json
 import time
 
 import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as M
 
 from aerodaas.model.types import GeoPoint
 
@@ -37,6 +38,23 @@ def replace_mission_on_read(emu, times: int, shift_last: bool = False) -> list[i
 
     emu.handlers["MISSION_REQUEST_LIST"] = replaced
     return dropped
+
+
+def replace_mission_on_arm(emu) -> list[int]:
+    """Make the emulated vehicle hold another mission (the last item's latitude 1e-5 degree further north) when it
+    is next asked to arm, as if another ground station had uploaded one; returns the mission lengths replaced."""
+    handler = emu.handlers["COMMAND_LONG"]
+    replaced: list[int] = []
+
+    def arming(link, msg):
+        if msg.command == M.MAV_CMD_COMPONENT_ARM_DISARM and msg.param1 == 1 and not replaced:
+            with emu._lock:
+                replaced.append(len(emu.missions.mission))
+                emu.missions.mission[-1].x += 100
+        handler(link, msg)
+
+    emu.handlers["COMMAND_LONG"] = arming
+    return replaced
 
 
 def run_until(backend, cond, timeout_s: float = 15.0, every=None) -> bool:

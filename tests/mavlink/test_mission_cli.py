@@ -11,7 +11,7 @@ from aerodaas.emulators.mavlink import MavlinkVehicleEmulator
 from aerodaas.missionfile import load_mission
 from aerodaas.model.types import GeoPoint
 from tests.conftest import DATA_DIR
-from tests.mavlink.emulated import replace_mission_on_read
+from tests.mavlink.emulated import replace_mission_on_arm, replace_mission_on_read
 
 SQUARE = DATA_DIR / "missions" / "qgc_test_simple_square.plan"  # take-off + 4-waypoint square
 
@@ -20,9 +20,9 @@ SQUARE = DATA_DIR / "missions" / "qgc_test_simple_square.plan"  # take-off + 4-w
 def vehicle():
     made: list = []
 
-    def make(autopilot: str) -> tuple[MavlinkVehicleEmulator, str]:
+    def make(autopilot: str, **kw) -> tuple[MavlinkVehicleEmulator, str]:
         emu = MavlinkVehicleEmulator(autopilot, speedup=10.0, gps_lock_s=1.0,
-                                     home=GeoPoint(lat=47.397742, lon=8.545594, alt=488.0))
+                                     home=GeoPoint(lat=47.397742, lon=8.545594, alt=488.0), **kw)
         made.append(emu)
         return emu, emu.start("tcp:127.0.0.1:0")
 
@@ -223,6 +223,22 @@ def test_a_mission_the_vehicle_replaces_twice_is_not_started(vehicle, tmp_path, 
            "mission replaced it; uploaded it once more" in err, err
     assert "the mission read back differs from the one sent: mission: count 5 sent, 0 stored; not started" in err, err
     assert not emu.snapshot()["armed"]
+
+
+def test_a_mission_replaced_before_the_start_is_not_started_and_the_vehicle_is_disarmed(vehicle, tmp_path, capsys):
+    """PX4 holds another mission by the time it is armed (another station's upload): its MISSION_CURRENT reports
+    another mission id than the upload's ACK gave, so --start exits 2 naming both, never switches to the mission, and
+    disarms the vehicle it armed (PX4's own disarm without a take-off, 10 vehicle s at 10x, put off here)."""
+    emu, address = vehicle("px4", params={"COM_DISARM_PRFLT": 600.0})
+    replaced = replace_mission_on_arm(emu)
+    path = _wpl(tmp_path / "speedy.waypoints", SPEEDY)
+    assert main(["mission", "upload", str(path), "--connection", address, "--start"]) == 2
+    err = capsys.readouterr().err
+    assert replaced == [5], replaced
+    assert "start_mission: the vehicle reports mission id " in err and "another mission replaced it; not started" \
+        in err, err
+    snap = emu.snapshot()
+    assert not snap["armed"] and "AUTO.MISSION" not in [m for _, m in emu.mode_log], (snap["armed"], emu.mode_log)
 
 
 NAVTEST = Path(__file__).parents[1] / "data" / "missions" / "CMAC-copter-navtest.waypoints"
