@@ -28,7 +28,7 @@ def plan_id(msg: Any) -> int:
     """The plan id a received MISSION_ACK, MISSION_COUNT or MISSION_CURRENT carries: the declared field where the
     message definitions have it, else read from the frame's payload (zero-padded: MAVLink 2 drops trailing zero
     bytes). 0 for a MAVLink 1 frame (no extensions), a message not received from a link, or another type. Raises
-    nothing."""
+    AttributeError for an object that is no pymavlink message."""
     field = PLAN_ID_FIELDS.get(msg.get_type())
     if field is None:
         return 0

@@ -29,8 +29,8 @@ _RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE
 #: horizontal metres from a mission waypoint at which the vehicle counts as arrived (its hold begins): ArduPilot at
 #: most this, PX4 the item's own acceptance radius (see AutopilotMission._remember_waypoints); without one, this
 _ARRIVAL_RADIUS_M = 0.5
-#: wall seconds the start waits for a MISSION_CURRENT that reports the uploaded mission's id: three of the 1 Hz
-#: (vehicle time) we ask for (_common.py); PX4 sends one at once after an accepted upload
+#: wall seconds the first start after an upload waits for a MISSION_CURRENT that reports the uploaded mission's id:
+#: three of the 1 Hz (vehicle time) we ask for (_common.py)
 _PLAN_ID_WAIT_S = 3.0
 
 
@@ -325,7 +325,9 @@ class AutopilotMission:
         (:meth:`_check_plan_id`; nothing is sent); as :meth:`CommandProtocol.command_long` /
         :meth:`CommandProtocol.set_mode`."""
         self._signed.require("start_mission")
-        self._check_plan_id()
+        with self._lock:
+            resume = self._started
+        self._check_plan_id(fresh=not resume)
         with self._lock:  # a resume (start again without a new upload) keeps the progress it has
             self._started = True
         self._offboard.stop()
@@ -335,15 +337,21 @@ class AutopilotMission:
         else:
             self._commands.command_long("mission start", M.MAV_CMD_MISSION_START, 0, 0)
 
-    def _check_plan_id(self) -> None:
+    def _check_plan_id(self, fresh: bool) -> None:
         """Where the vehicle gave our uploaded mission a plan id (PX4: MISSION_ACK.opaque_id), its MISSION_CURRENT
         must report that id (``mission_id``) before the start: PX4 can replace a mission it accepted and we read
         back (a mission state its navigator publishes with another id, ``MavlinkMissionManager::
         check_active_mission``; a ground station's upload), and MISSION_START / AUTO.MISSION would fly that one.
-        Waits up to :data:`_PLAN_ID_WAIT_S` for such a report. Raises BackendError naming both ids otherwise."""
+        ``fresh`` (the first start after an upload): only a MISSION_CURRENT received from now on counts, waited for
+        up to :data:`_PLAN_ID_WAIT_S`, since PX4 announces a new mission at once on the link that uploaded it only
+        and streams MISSION_CURRENT at 1 Hz per link (``MavlinkMissionManager::send``, its ``_slow_rate_limiter``),
+        so our link's last report may predate another station's upload by up to a second. A resume (start again,
+        from the control loop) judges by the last report without waiting. Raises BackendError naming both ids."""
         with self._lock:
             ours = self._plan_id
-        if not ours or self._plan_confirmed.wait(_PLAN_ID_WAIT_S):
+            if ours and fresh:
+                self._plan_confirmed.clear()
+        if not ours or self._plan_confirmed.wait(_PLAN_ID_WAIT_S if fresh else 0.0):
             return
         with self._lock:
             reported = self._reported_plan_id

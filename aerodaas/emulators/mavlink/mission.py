@@ -201,7 +201,9 @@ class MissionProtocol:
             self._transfer = None
             self._mission_ack(link, tr.sysid, tr.compid, M.MAV_MISSION_ACCEPTED, plan_id=self.store.mission_id())
             self.link.text(M.MAV_SEVERITY_INFO, f"Flight plan received ({tr.count} items)")
-            self.telemetry.emit(M.MAVLINK_MSG_ID_MISSION_CURRENT)
+            # PX4 announces the new mission at once on the uploading link only (its other links at their 1 Hz:
+            # MavlinkMissionManager::send, the sequence it last sent being shared by all its links)
+            self.telemetry.emit(M.MAVLINK_MSG_ID_MISSION_CURRENT, link if st.px4 else None)
         else:
             self._request_next()
 

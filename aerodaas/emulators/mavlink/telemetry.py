@@ -101,11 +101,11 @@ class Telemetry:
                 else:
                     self.intervals.pop(mid, None)
 
-    def emit(self, msg_id: int) -> None:
-        """Send message ``msg_id`` (:meth:`build`) to every peer, if the vehicle has one to send."""
+    def emit(self, msg_id: int, link: _Link | None = None) -> None:
+        """Send message ``msg_id`` (:meth:`build`) to ``link`` (None: every peer), if the vehicle has one to send."""
         msg = self.build(msg_id)
         if msg is not None:
-            self.link.send(msg)
+            self.link.send(msg, link)
 
     def build(self, msg_id: int) -> Any | None:
         """The message ``msg_id`` for the current state, or None when the vehicle has none to send."""
