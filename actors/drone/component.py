@@ -492,11 +492,11 @@ class DroneComponent:
             return False
         self._resume_req.clear()
         back = self.flight.paused_from or S.HOVERING
+        if self.autopilot_mission:  # AUTO / MISSION from its current item; refused (another mission): stays PAUSED
+            v.mission.start()
         self.fsm.transition(back if back != S.WAYPOINT_HOLD else S.NAVIGATING, t)
         self._event("resumed")
-        if self.autopilot_mission:
-            v.mission.start()  # back to AUTO / AUTO.MISSION: the autopilot goes on from its current item
-        elif back == S.TAKING_OFF:
+        if back == S.TAKING_OFF and not self.autopilot_mission:
             v.actions.takeoff(self.takeoff_altitude)
         self.flight.active_wp = None
         self.flight.hold_until = None

@@ -83,3 +83,17 @@ def test_ardupilot_gives_no_plan_id_and_its_start_is_not_held_back(fly):
     b.actions.arm()
     b.mission.start()
     assert run_until(b, lambda: b.state().in_air and b.state().position[2] > 1.0, 20), b.state().position
+
+
+def test_a_start_no_mission_current_confirms_is_refused_saying_so(fly):
+    """A link that carries the upload's plan id but no MISSION_CURRENT (a router filtering it): the first start
+    cannot confirm the mission and refuses after its wait, saying that none came rather than naming an id."""
+    emu, b = fly("px4")
+    assert run_until(b, lambda: position_ready(b), 10)
+    b.mission.upload([Waypoint(id="a", x=8.0, y=0.0, z=5.0)], takeoff_altitude=5.0, final_action="land")
+    emu.drop_next("MISSION_CURRENT", "out", count=10_000)
+    b.actions.arm()
+    with pytest.raises(BackendError, match=r"start_mission: no MISSION_CURRENT from the vehicle within 3 s to confirm "
+                                           r"that it holds the mission uploaded \(mission id \d+\); not started"):
+        b.mission.start()
+    assert emu.snapshot()["mode"] != "AUTO.MISSION"

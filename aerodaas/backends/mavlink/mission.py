@@ -97,6 +97,7 @@ class AutopilotMission:
         self._live = False  # ... and a MISSION_CURRENT said the mission runs: the reports are its progress
         self._plan_id = 0  # the id the vehicle gave our uploaded mission (MISSION_ACK.opaque_id); 0: none given
         self._reported_plan_id = 0  # the id in the latest MISSION_CURRENT (mission_id)
+        self._reports = 0  # MISSION_CURRENTs received
         self._plan_confirmed = threading.Event()  # the latest MISSION_CURRENT reports _plan_id
         link.handle("MISSION_CURRENT", self.on_mission_current)
         link.handle("MISSION_ITEM_REACHED", self.on_mission_item_reached)
@@ -346,15 +347,20 @@ class AutopilotMission:
         up to :data:`_PLAN_ID_WAIT_S`, since PX4 announces a new mission at once on the link that uploaded it only
         and streams MISSION_CURRENT at 1 Hz per link (``MavlinkMissionManager::send``, its ``_slow_rate_limiter``),
         so our link's last report may predate another station's upload by up to a second. A resume (start again,
-        from the control loop) judges by the last report without waiting. Raises BackendError naming both ids."""
+        from the control loop) judges by the last report without waiting. Raises BackendError naming both ids, or
+        saying that no MISSION_CURRENT came (a link that filters it cannot confirm the mission)."""
         with self._lock:
-            ours = self._plan_id
+            ours, before = self._plan_id, self._reports
             if ours and fresh:
                 self._plan_confirmed.clear()
         if not ours or self._plan_confirmed.wait(_PLAN_ID_WAIT_S if fresh else 0.0):
             return
         with self._lock:
-            reported = self._reported_plan_id
+            reported, came = self._reported_plan_id, self._reports > before
+        if fresh and not came:
+            raise BackendError(f"robot {self.robot_id!r}: start_mission: no MISSION_CURRENT from the vehicle within "
+                               f"{_PLAN_ID_WAIT_S:g} s to confirm that it holds the mission uploaded (mission id "
+                               f"{ours}); not started")
         raise BackendError(f"robot {self.robot_id!r}: start_mission: the vehicle reports mission id {reported}, not "
                            f"{ours}, the id it gave the mission uploaded: another mission replaced it; not started "
                            f"(upload the mission again)")
@@ -370,6 +376,7 @@ class AutopilotMission:
         """MISSION_CURRENT: the autopilot's current item, from the first one that says the started mission runs
         (see the class); its plan id for :meth:`_check_plan_id`. Caller holds the backend's lock (the I/O thread)."""
         self._reported_plan_id = plan_id(msg)
+        self._reports += 1
         if self._plan_id and self._reported_plan_id == self._plan_id:
             self._plan_confirmed.set()
         else:
