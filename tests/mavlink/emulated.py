@@ -6,8 +6,10 @@ import json
 import time
 
 import numpy as np
+from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
+from aerodaas.missionfile.plan_ids import plan_id
 from aerodaas.model.types import GeoPoint
 
 AUTOPILOTS = ["ardupilot", "px4"]
@@ -55,6 +57,26 @@ def replace_mission_on_arm(emu) -> list[int]:
 
     emu.handlers["COMMAND_LONG"] = arming
     return replaced
+
+
+def upload_as_another_station(address: str, lat: float, lon: float) -> int:
+    """A second ground station (system 255, pymavlink alone) uploads a one-waypoint mission; its ACK's plan id."""
+    m = mavutil.mavlink_connection(address, source_system=255)
+    try:
+        m.wait_heartbeat(timeout=10)
+        m.mav.mission_count_send(m.target_system, m.target_component, 1, 0)
+        while True:
+            msg = m.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True,
+                               timeout=10)
+            assert msg is not None, "no answer to the other station's upload"
+            if msg.get_type() == "MISSION_ACK":
+                assert msg.type == M.MAV_MISSION_ACCEPTED
+                return plan_id(msg)
+            m.mav.mission_item_int_send(m.target_system, m.target_component, 0, M.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                                        M.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, int(lat * 1e7), int(lon * 1e7),
+                                        30.0, 0)
+    finally:
+        m.close()
 
 
 def run_until(backend, cond, timeout_s: float = 15.0, every=None) -> bool:

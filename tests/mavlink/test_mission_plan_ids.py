@@ -5,13 +5,12 @@ uploaded (the emulated PX4 gives ids as the firmware does; ArduCopter gives none
 from __future__ import annotations
 
 import pytest
-from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as M
 
 from aerodaas.backends import BackendError
 from aerodaas.missionfile.plan_ids import plan_id, with_plan_id
 from aerodaas.model.types import Waypoint
-from tests.mavlink.emulated import position_ready, run_until
+from tests.mavlink.emulated import position_ready, run_until, upload_as_another_station
 
 
 def test_a_plan_id_crosses_a_link_in_each_message_that_carries_one():
@@ -29,26 +28,6 @@ def test_a_plan_id_crosses_a_link_in_each_message_that_carries_one():
         with_plan_id(sender.mission_ack_encode(1, 1, 0, 0), 1 << 32)
 
 
-def _upload_as_another_station(address: str, lat: float, lon: float) -> int:
-    """A second ground station (system 255, pymavlink alone) uploads a one-waypoint mission; its ACK's plan id."""
-    m = mavutil.mavlink_connection(address, source_system=255)
-    try:
-        m.wait_heartbeat(timeout=10)
-        m.mav.mission_count_send(m.target_system, m.target_component, 1, 0)
-        while True:
-            msg = m.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True,
-                               timeout=10)
-            assert msg is not None, "no answer to the other station's upload"
-            if msg.get_type() == "MISSION_ACK":
-                assert msg.type == M.MAV_MISSION_ACCEPTED
-                return plan_id(msg)
-            m.mav.mission_item_int_send(m.target_system, m.target_component, 0, M.MAV_FRAME_GLOBAL_RELATIVE_ALT,
-                                        M.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, int(lat * 1e7), int(lon * 1e7),
-                                        30.0, 0)
-    finally:
-        m.close()
-
-
 def test_a_mission_another_station_replaced_after_the_upload_is_not_started(fly):
     """PX4 gives the uploaded mission an id; once the vehicle is armed another ground station uploads its own, and
     the start follows at once: our link's last MISSION_CURRENT still reports our id (PX4 announces the new one only
@@ -63,7 +42,7 @@ def test_a_mission_another_station_replaced_after_the_upload_is_not_started(fly)
     assert ours and ours[0] != 0
     b.actions.arm()
     home = b.telemetry.home
-    theirs = _upload_as_another_station(emu.address, home.lat + 1e-4, home.lon)
+    theirs = upload_as_another_station(emu.address, home.lat + 1e-4, home.lon)
     assert theirs not in (0, ours[0])
     with pytest.raises(BackendError, match=f"the vehicle reports mission id {theirs}, not {ours[0]}, the id it gave "
                                            f"the mission uploaded: another mission replaced it; not started"):

@@ -29,8 +29,8 @@ _RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE
 #: horizontal metres from a mission waypoint at which the vehicle counts as arrived (its hold begins): ArduPilot at
 #: most this, PX4 the item's own acceptance radius (see AutopilotMission._remember_waypoints); without one, this
 _ARRIVAL_RADIUS_M = 0.5
-#: wall seconds the first start after an upload waits for a MISSION_CURRENT that reports the uploaded mission's id:
-#: three of the 1 Hz (vehicle time) we ask for (_common.py)
+#: wall seconds a start waits at most for a MISSION_CURRENT that reports the uploaded mission's id: three of the
+#: 1 Hz (vehicle time) we ask for (_common.py)
 _PLAN_ID_WAIT_S = 3.0
 
 
@@ -97,8 +97,7 @@ class AutopilotMission:
         self._live = False  # ... and a MISSION_CURRENT said the mission runs: the reports are its progress
         self._plan_id = 0  # the id the vehicle gave our uploaded mission (MISSION_ACK.opaque_id); 0: none given
         self._reported_plan_id = 0  # the id in the latest MISSION_CURRENT (mission_id)
-        self._reports = 0  # MISSION_CURRENTs received
-        self._plan_confirmed = threading.Event()  # the latest MISSION_CURRENT reports _plan_id
+        self._reported = threading.Event()  # a MISSION_CURRENT came since the start cleared it
         link.handle("MISSION_CURRENT", self.on_mission_current)
         link.handle("MISSION_ITEM_REACHED", self.on_mission_item_reached)
         telemetry.notify_positions(self)
@@ -177,12 +176,9 @@ class AutopilotMission:
             with self._lock:  # closed before the transfer: the vehicle may announce the new mission with its ACK
                 self._uploaded, self._started, self._live, self._seq = True, False, False, -1
                 self._plan_id = 0
-                self._plan_confirmed.clear()
             given = self._transfers.upload_mission(wire)
             with self._lock:
                 self._plan_id = given
-                if given and self._reported_plan_id == given:
-                    self._plan_confirmed.set()
             stored, floats = self._download_items()
             # as this autopilot stores a mission (ArduPilot: altitudes in whole centimetres, hold times in whole
             # seconds); positions read back as float32 degrees (MISSION_ITEM) within float32 precision
@@ -313,7 +309,6 @@ class AutopilotMission:
         """MISSION_CLEAR_ALL; waits for MISSION_ACK. Raises CommandRefused / BackendError / LinkLost."""
         with self._lock:
             self._plan_id = 0
-            self._plan_confirmed.clear()
         self._transfers.clear_mission()
 
     def start(self) -> None:
@@ -326,9 +321,7 @@ class AutopilotMission:
         (:meth:`_check_plan_id`; nothing is sent); as :meth:`CommandProtocol.command_long` /
         :meth:`CommandProtocol.set_mode`."""
         self._signed.require("start_mission")
-        with self._lock:
-            resume = self._started
-        self._check_plan_id(fresh=not resume)
+        self._check_plan_id()
         with self._lock:  # a resume (start again without a new upload) keeps the progress it has
             self._started = True
         self._offboard.stop()
@@ -338,26 +331,28 @@ class AutopilotMission:
         else:
             self._commands.command_long("mission start", M.MAV_CMD_MISSION_START, 0, 0)
 
-    def _check_plan_id(self, fresh: bool) -> None:
+    def _check_plan_id(self) -> None:
         """Where the vehicle gave our uploaded mission a plan id (PX4: MISSION_ACK.opaque_id), its MISSION_CURRENT
         must report that id (``mission_id``) before the start: PX4 can replace a mission it accepted and we read
         back (a mission state its navigator publishes with another id, ``MavlinkMissionManager::
         check_active_mission``; a ground station's upload), and MISSION_START / AUTO.MISSION would fly that one.
-        ``fresh`` (the first start after an upload): only a MISSION_CURRENT received from now on counts, waited for
-        up to :data:`_PLAN_ID_WAIT_S`, since PX4 announces a new mission at once on the link that uploaded it only
+        Only a MISSION_CURRENT received from now on counts, waited for up to :data:`_PLAN_ID_WAIT_S` (one report
+        period: up to 1 s at PX4's rate), since PX4 announces a new mission at once on the link that uploaded it only
         and streams MISSION_CURRENT at 1 Hz per link (``MavlinkMissionManager::send``, its ``_slow_rate_limiter``),
-        so our link's last report may predate another station's upload by up to a second. A resume (start again,
-        from the control loop) judges by the last report without waiting. Raises BackendError naming both ids, or
-        saying that no MISSION_CURRENT came (a link that filters it cannot confirm the mission)."""
+        so our link's last report may predate another station's upload by up to a second; also for a resume (a
+        start again without an upload). Raises BackendError naming both ids, or saying that no MISSION_CURRENT
+        came (a link that filters it cannot confirm the mission)."""
         with self._lock:
-            ours, before = self._plan_id, self._reports
-            if ours and fresh:
-                self._plan_confirmed.clear()
-        if not ours or self._plan_confirmed.wait(_PLAN_ID_WAIT_S if fresh else 0.0):
+            ours = self._plan_id
+            self._reported.clear()
+        if not ours:
             return
+        came = self._reported.wait(_PLAN_ID_WAIT_S)
         with self._lock:
-            reported, came = self._reported_plan_id, self._reports > before
-        if fresh and not came:
+            reported = self._reported_plan_id
+        if came and reported == ours:
+            return
+        if not came:
             raise BackendError(f"robot {self.robot_id!r}: start_mission: no MISSION_CURRENT from the vehicle within "
                                f"{_PLAN_ID_WAIT_S:g} s to confirm that it holds the mission uploaded (mission id "
                                f"{ours}); not started")
@@ -376,11 +371,7 @@ class AutopilotMission:
         """MISSION_CURRENT: the autopilot's current item, from the first one that says the started mission runs
         (see the class); its plan id for :meth:`_check_plan_id`. Caller holds the backend's lock (the I/O thread)."""
         self._reported_plan_id = plan_id(msg)
-        self._reports += 1
-        if self._plan_id and self._reported_plan_id == self._plan_id:
-            self._plan_confirmed.set()
-        else:
-            self._plan_confirmed.clear()
+        self._reported.set()
         if not self._live:
             ours = self._started or not self._uploaded
             if not (ours and reports_the_running_mission(getattr(msg, "mission_state", 0) or 0, self._link.mode)):
