@@ -553,7 +553,7 @@ class DroneComponent:
         st = self.fsm.state
         if st != S.PAUSED and self.fsm.can(S.PAUSED):
             self.flight.paused_from = st
-            v.guidance.hold()
+            (v.mission.pause if self.autopilot_mission else v.guidance.hold)()  # the autopilot's own mission: held
             self.fsm.transition(S.PAUSED, t)
             self._event("paused")
         return True

@@ -331,6 +331,14 @@ class AutopilotMission:
         else:
             self._commands.command_long("mission start", M.MAV_CMD_MISSION_START, 0, 0)
 
+    def pause(self) -> None:
+        """Hold the autopilot's mission where the vehicle is: its hold mode (ArduPilot LOITER, PX4 AUTO.LOITER), also
+        while it takes off, before its landed state says airborne (a hold that only stops our targets on the ground
+        would let the mission fly on); :meth:`start` resumes it from its current item. Raises as
+        :meth:`CommandProtocol.set_mode`."""
+        self._offboard.stop()
+        self._commands.set_mode("LOITER")
+
     def _check_plan_id(self) -> None:
         """Where the vehicle gave our uploaded mission a plan id (PX4: MISSION_ACK.opaque_id), its MISSION_CURRENT
         must report that id (``mission_id``) before the start: PX4 can replace a mission it accepted and we read
