@@ -65,8 +65,9 @@ drone.start_mission()
 """
 
 
-@pytest.mark.e2e
-def test_a_resume_the_vehicle_refuses_keeps_the_drone_paused(ray_session, run_options, tmp_path):
+def _start_app(run_options, tmp_path) -> tuple:
+    """:data:`APP` on the emulated PX4 (10x, the farm survey's robot flying autopilot missions, recorded to
+    ``farm.mcap``), run on a thread: (emulator, thread, ``out`` with the run's ``res`` or its ``error``)."""
     from aerodaas.runtime.driver import run_file
 
     emu, env_path = _mavlink_variant("farm_survey", "px4", 10.0, tmp_path, mavlink={"use_autopilot_mission": True},
@@ -79,13 +80,27 @@ def test_a_resume_the_vehicle_refuses_keeps_the_drone_paused(ray_session, run_op
     def run() -> None:
         try:
             out["res"] = run_file(str(app), run_options)[-1]
-        except BaseException as e:  # noqa: BLE001 - said in the assertions below
+        except BaseException as e:  # noqa: BLE001 - said in the assertions
             out["error"] = repr(e)
 
     th = threading.Thread(target=run, daemon=True)
     th.start()
+    return emu, th, out
+
+
+def _ended(emu, th: threading.Thread, out: dict, what: str) -> dict:
+    """Wait for the run's end (failing with ``what`` after 120 s); the emulated vehicle's own state then."""
+    th.join(timeout=120)
+    assert not th.is_alive(), what
+    assert "res" in out, out
+    return emu.snapshot()
+
+
+@pytest.mark.e2e
+def test_a_resume_the_vehicle_refuses_keeps_the_drone_paused(ray_session, run_options, tmp_path):
+    emu, th, out = _start_app(run_options, tmp_path)
     try:
-        # past the take-off item (a pause during the take-off is not taken): on the way to, or holding at, wp1
+        # past the take-off item: on the way to, or holding at, wp1
         _until(lambda: emu.snapshot()["mission_seq"] >= 1 and emu.snapshot()["mode"] == "AUTO.MISSION",
                "never flew the mission", th, out)
         time.sleep(0.3)
@@ -99,12 +114,9 @@ def test_a_resume_the_vehicle_refuses_keeps_the_drone_paused(ray_session, run_op
         time.sleep(1.0)  # ten vehicle seconds at 10x: a resumed mission would be flying by now
         assert emu.snapshot()["mode"] != "AUTO.MISSION", list(emu.mode_log)
         _land_as_another_station(emu.address)
-        th.join(timeout=120)
-        assert not th.is_alive(), "the run did not end after the vehicle landed"
-        vehicle = emu.snapshot()
+        vehicle = _ended(emu, th, out, "the run did not end after the vehicle landed")
     finally:
         emu.stop()
-    assert "res" in out, out
     assert out["res"].outcome != "success" and not vehicle["armed"] and not vehicle["in_air"], out["res"].outcome
     run = load_run(str(tmp_path / "farm.mcap"))
     refused = [e for e in run["events"] if e["event"] == "backend_error"
@@ -122,34 +134,15 @@ def test_a_pause_during_the_autopilot_missions_take_off_holds_the_vehicle_and_th
     airborne): the vehicle goes to its hold mode (the drone's hold used to only stop our targets while the landed
     state said on the ground, and the mission flew on under PAUSED: 1 of 3 runs of this test); resumed, it flies
     the mission to its end (both waypoints, landed)."""
-    from aerodaas.runtime.driver import run_file
-
-    emu, env_path = _mavlink_variant("farm_survey", "px4", 10.0, tmp_path, mavlink={"use_autopilot_mission": True},
-                                     params={"COM_OF_LOSS_T": 5.0}, without=("cam1",))
-    app = tmp_path / "pause_app.py"
-    app.write_text(APP.replace("DIR", repr(str(tmp_path))))
-    run_options.env_path, run_options.record = str(env_path), str(tmp_path / "farm.mcap")
-    out: dict = {}
-
-    def run() -> None:
-        try:
-            out["res"] = run_file(str(app), run_options)[-1]
-        except BaseException as e:  # noqa: BLE001 - said in the assertions below
-            out["error"] = repr(e)
-
-    th = threading.Thread(target=run, daemon=True)
-    th.start()
+    emu, th, out = _start_app(run_options, tmp_path)
     try:
         _until(lambda: emu.snapshot()["mode"] == "AUTO.MISSION", "never started the mission", th, out)
         (tmp_path / "pause").touch()
         _until(lambda: emu.snapshot()["mode"] == "AUTO.LOITER", "the pause never reached the vehicle", th, out, 10.0)
         (tmp_path / "resume").touch()
-        th.join(timeout=120)
-        assert not th.is_alive(), "the run did not end"
-        vehicle = emu.snapshot()
+        vehicle = _ended(emu, th, out, "the run did not end")
     finally:
         emu.stop()
-    assert "res" in out, out
     rep = out["res"].robots["quadrotor_base"]
     assert out["res"].outcome == "success", (rep.get("error"), rep["events"][-5:])
     assert [v["id"] for v in rep["visited_waypoints"]] == ["wp1", "wp2"] and not vehicle["armed"]
