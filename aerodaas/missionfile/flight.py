@@ -4,6 +4,7 @@ action and geofence a drone flies; :func:`plan_to_navigation` for the waypoints 
 from __future__ import annotations
 
 from collections import Counter
+from itertools import islice
 import math
 
 from pathlib import Path
@@ -87,7 +88,7 @@ def plan_to_flight(plan: MissionPlan, home: GeoPoint | None = None, *, skip_comm
     items = expand_items(plan)
     fb = _FlightBuilder(src, home, skip, min_altitude, max_altitude, max_distance)
     for k, item in enumerate(items):
-        fb.item(item, items[k + 1:])
+        fb.item(item, islice(items, k + 1, None))  # lazily: a slice per item copies the rest (quadratic)
 
     for k, (lat, lon, alt) in enumerate(plan.rally_points):  # the autopilot's RTL may fly to them
         _check_bounds(src, f"rally point {k + 1}", lat, lon, alt, home, max_altitude, max_distance)
@@ -120,8 +121,8 @@ class _FlightBuilder:
         self.speed: float | None = None
         self.last: tuple[float, float, float] | None = None
 
-    def item(self, item: MissionItem, rest: list[MissionItem]) -> None:
-        """Take one item (``rest``: the items after it)."""
+    def item(self, item: MissionItem, rest: Iterable[MissionItem]) -> None:
+        """Take one item (``rest``: the items after it, read only when needed)."""
         tag, cmd = item.describe(), item.command
         if cmd in self.skip:
             self.skipped.append(f"{tag} skipped")
@@ -176,7 +177,7 @@ class _FlightBuilder:
             raise _fail(self.src, tag, _first_error(e)) from None
         self.last = (lat, lon, z)
 
-    def _position_item(self, item: MissionItem, tag: str, rest: list[MissionItem]) -> None:
+    def _position_item(self, item: MissionItem, tag: str, rest: Iterable[MissionItem]) -> None:
         """NAV_WAYPOINT, NAV_TAKEOFF, NAV_LOITER_TIME, NAV_LOITER_UNLIM: a waypoint."""
         src, cmd, p = self.src, item.command, item.params
         lat, lon = p[4], p[5]
@@ -199,9 +200,9 @@ class _FlightBuilder:
         if cmd == MAV_CMD_NAV_WAYPOINT:
             radius = p[1]
         if cmd == MAV_CMD_NAV_LOITER_UNLIM:
-            after = [it for it in rest if it.command not in self.skip]
-            if after:
-                raise _fail(src, tag, f"loiters forever, so the following {after[0].describe()} would never run")
+            after = next((it for it in rest if it.command not in self.skip), None)
+            if after is not None:
+                raise _fail(src, tag, f"loiters forever, so the following {after.describe()} would never run")
             self.final = "hover"
         self._add_waypoint(item, tag, lat, lon, z, hover, radius)
 
