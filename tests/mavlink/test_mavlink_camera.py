@@ -137,7 +137,7 @@ def test_vehicle_tracking_reads_the_stream_the_vehicle_announces(tmp_path, monke
     the environment says only ``source: "mavlink"``."""
     from aerodaas.config import load_environment_config
     from aerodaas.recording.metrics import load_run
-    from tests.video.video_rig import RtspServer, check_stream_recording, make_footage
+    from tests.video.video_rig import QUICK_LIMITS, RtspServer, check_stream_recording, make_footage
 
     footage = make_footage(tmp_path / "pan.mp4", seconds=8.0, empty_s=22.0)
     server = RtspServer(footage)
@@ -147,6 +147,7 @@ def test_vehicle_tracking_reads_the_stream_the_vehicle_announces(tmp_path, monke
     addr = emu.start("tcp:127.0.0.1:0")
     env = _env({"source": "mavlink", "discovery_timeout_s": 30.0},
                {"backend": "mavlink", "mavlink": {"connection": addr, "autopilot": "ardupilot"}})
+    env["robots"][0]["limits"].update(QUICK_LIMITS)  # the discovery and the stream are under test, not the pace
     env_path = tmp_path / "vt_mavlink_camera.json"
     env_path.write_text(json.dumps(env))
     rec = tmp_path / "run.mcap"
