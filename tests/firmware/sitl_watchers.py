@@ -1,7 +1,8 @@
 """Watchers beside a SITL flight, each independent of AeroDaaS's own view (run as ``python -m tests.firmware.sitl_watchers
 COMMAND ...`` from the steps of :func:`tests.firmware.sitl.run_in_namespace`): followers of the firmware's own telemetry
-(``observe``, ``observe-raw``, ``observe-truth``) and the faults (``stop-when-flying``: the firmware SIGSTOPped,
-``freeze-our-drone``: our drone actor SIGSTOPped)."""
+(``observe``, ``observe-raw``, ``observe-truth``), the faults (``stop-when-flying``: the firmware SIGSTOPped,
+``freeze-our-drone``: our drone actor SIGSTOPped) and ``real-time-when-ready`` (an ArduCopter booted fast, then
+slowed to real time once it passes its pre-arm checks)."""
 from __future__ import annotations
 
 import json
@@ -280,6 +281,44 @@ def freeze_our_drone_when_flying(conn: str, root_pid: int, out: str, delay_s: fl
     return 0 if frozen else 1
 
 
+def real_time_when_ready(conn: str, speedup: float = 1.0, timeout_s: float = 120.0) -> int:
+    """Set an ArduCopter SITL's ``SIM_SPEEDUP`` (the simulator's, not the vehicle's, parameter) to ``speedup`` once
+    its pre-arm checks pass (``SYS_STATUS.onboard_control_sensors_health`` has ``MAV_SYS_STATUS_PREARM_CHECK``), so
+    a firmware booted at a high speed-up waits for its GPS and EKF at that speed and then flies in real time: MAVProxy's
+    ``sitl_autospeedup`` module does the same the other way round. 0 once the firmware reports the new value; 1 after
+    ``timeout_s`` wall seconds."""
+    from pymavlink import mavutil
+
+    m = mavutil.mavlink_connection(conn, source_system=250, source_component=191)
+    end = time.monotonic() + timeout_s
+    ready = asked = 0.0
+    target = None  # (system, component) of the autopilot, from its HEARTBEAT
+    while time.monotonic() < end:
+        msg = m.recv_match(type=["HEARTBEAT", "SYS_STATUS", "PARAM_VALUE"], blocking=True, timeout=0.5)
+        now = time.monotonic()
+        if target and not ready and now - asked > 0.5:  # Copter streams SYS_STATUS only when asked
+            m.mav.command_long_send(*target, mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
+                                    mavutil.mavlink.MAVLINK_MSG_ID_SYS_STATUS, 0, 0, 0, 0, 0, 0)
+            asked = now
+        if msg is None:
+            continue
+        t = msg.get_type()
+        if t == "HEARTBEAT" and msg.type != mavutil.mavlink.MAV_TYPE_GCS and target is None:
+            target = (msg.get_srcSystem(), msg.get_srcComponent())
+        if t == "SYS_STATUS" and msg.onboard_control_sensors_health & mavutil.mavlink.MAV_SYS_STATUS_PREARM_CHECK:
+            ready = ready or now
+        if ready and now - asked > 0.5:
+            m.mav.param_set_send(*target, b"SIM_SPEEDUP", float(speedup),
+                                 mavutil.mavlink.MAV_PARAM_TYPE_REAL32)
+            asked = now
+        if t == "PARAM_VALUE" and msg.param_id == "SIM_SPEEDUP" and ready and abs(msg.param_value - speedup) < 1e-6:
+            print(f"SIM_SPEEDUP {speedup:g}: pre-arm checks passed, the firmware now runs at {speedup:g}x", flush=True)
+            return 0
+    print(f"the firmware did not pass its pre-arm checks and take SIM_SPEEDUP {speedup:g} in {timeout_s:g} s",
+          flush=True)
+    return 1
+
+
 if __name__ == "__main__":
     if sys.argv[1] == "observe":
         sys.exit(observe(sys.argv[2], sys.argv[3], float(sys.argv[4]), *sys.argv[5:6]))
@@ -295,4 +334,6 @@ if __name__ == "__main__":
                                               float(sys.argv[6])))
     if sys.argv[1] == "stop-when-flying":
         sys.exit(stop_when_flying(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])))
+    if sys.argv[1] == "real-time-when-ready":
+        sys.exit(real_time_when_ready(sys.argv[2], *map(float, sys.argv[3:5])))
     raise SystemExit(f"unknown command {sys.argv[1]!r}")

@@ -1,8 +1,9 @@
 """apps/vehicle_tracking.py, unchanged, on real ArduCopter SITL firmware with its camera from a video stream:
 from GStreamer's RTSP server (gst-rtsp-server) and from raw RTP H.264 on UDP 5600 as QGroundControl
 receives it, both fed with real aerial footage by a sender in the same private loopback-only network namespace as
-the firmware. The firmware runs in real time (speed-up 1: a stream runs on the wall clock, as on a real drone) with
-its default parameters plus what our backend sets, and the app's own limits.
+the firmware. The firmware flies in real time (speed-up 1: a stream runs on the wall clock, as on a real drone; it
+boots at 10x until its pre-arm checks pass) with its default parameters plus what our backend sets, and the app's
+own limits.
 
 Judged from the recording: the detector's detections of the footage's cars, the follow analytics' navigation
 commands, the firmware's own odometry after them (the vehicle flew), every frame taken from the stream recorded or
@@ -56,10 +57,15 @@ def _flight(tmp: Path, scheme: str) -> tuple[int | None, str, Path]:
     env = tmp / "vehicle_tracking_stream.json"
     env.write_text(json.dumps(cfg))
     rec = tmp / "run.mcap"
+    # booted at 10x until its pre-arm checks pass (GPS, EKF), then real time before the app connects
+    real_time = (f"{py} -m tests.firmware.sitl_watchers real-time-when-ready "
+                 f"{sitl.monitor_connection('ardupilot')} 1 120")
     step = (f"( {sender} > {shlex.quote(str(tmp / 'sender.log'))} 2>&1 & ) ; "
             + sitl.aerodaas_run(APP, env, rec, timeout_s=500))
-    sitl.run_in_namespace("ardupilot", tmp / "ns", [step], speedup=1.0, timeout_s=900)
-    rc, out = sitl.step_result(tmp / "ns", 0)
+    sitl.run_in_namespace("ardupilot", tmp / "ns", [real_time, step], speedup=10.0, timeout_s=900)
+    rc, text = sitl.step_result(tmp / "ns", 0)
+    assert rc == 0, text[-2000:]
+    rc, out = sitl.step_result(tmp / "ns", 1)
     return rc, out, rec
 
 
