@@ -31,10 +31,11 @@ from aerodaas.model.types import Attitude, GeoPoint, Odometry
 @dataclass
 class Setpoint:
     """``mode``: 'idle' (on ground), 'hold' (brake, then hover at ``target``: where it came to rest), 'position'
-    (fly to ``target``), 'velocity' (hold ``velocity`` m/s), 'land' (descend at the vertical speed limit down to
-    ``land_alt_low`` m above home, then at ``land_speed`` m/s: ArduCopter's LAND, ``Mode::land_run_vertical_control``
-    in ``ArduCopter/mode.cpp``, with ``LAND_SPEED_HIGH`` 0 (``WPNAV_SPEED_DN``) above ``LAND_ALT_LOW`` 10 m and
-    ``LAND_SPEED`` 50 cm/s below; PX4 slows from ``MPC_Z_V_AUTO_DN`` below ``MPC_LAND_ALT1`` 10 m alike). ``stopped``:
+    (fly to ``target``), 'velocity' (hold ``velocity`` m/s), 'land' (descend at ``land_speed_high`` m/s, None: the
+    vertical speed limit, down to ``land_alt_low`` m above home, then at ``land_speed`` m/s: ArduCopter's LAND,
+    ``Mode::land_run_vertical_control`` in ``ArduCopter/mode.cpp``, with ``LAND_SPEED_HIGH`` 0 (``WPNAV_SPEED_DN``)
+    above ``LAND_ALT_LOW`` 10 m and ``LAND_SPEED`` 50 cm/s below; PX4 slows from ``MPC_Z_V_AUTO_DN`` below
+    ``MPC_LAND_ALT1`` 10 m alike). ``stopped``:
     a hold has come to rest (before, it brakes)."""
 
     mode: str = "idle"
@@ -43,6 +44,7 @@ class Setpoint:
     speed: float | None = None  # m/s cap for position mode
     yaw_rate: float = 0.0  # deg/s for velocity mode
     land_speed: float = 0.5
+    land_speed_high: float | None = None  # m/s above land_alt_low (None: the vertical speed limit)
     land_alt_low: float = 10.0  # m above home
     stopped: bool = False
 
@@ -117,7 +119,8 @@ class SimVehicle:
             yr = min(max(float(sp.yaw_rate), -lim.max_yaw_rate), lim.max_yaw_rate)
             s.yaw = (s.yaw + yr * dt) % 360.0
         elif sp.mode == "land":
-            dz = -min(sp.land_speed if pz <= sp.land_alt_low else lim.max_vertical_speed, lim.max_vertical_speed)
+            high = lim.max_vertical_speed if sp.land_speed_high is None else sp.land_speed_high
+            dz = -min(sp.land_speed if pz <= sp.land_alt_low else high, lim.max_vertical_speed)
         elif sp.mode == "hold" and sp.target is not None and sp.stopped:
             m = lim.max_speed
             dx, dy, dz = (min(max((float(c) - p) * 1.5, -m), m) for c, p in zip(sp.target, (px, py, pz)))

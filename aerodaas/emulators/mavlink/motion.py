@@ -35,6 +35,12 @@ class Motion:
         p = self.state.params
         return p["MPC_LAND_SPEED"] if self.state.px4 else p["LAND_SPEED"] / 100.0
 
+    def land_speed_high(self) -> float:
+        """Descent speed (m/s) when landing from above 10 m: PX4 MPC_Z_VEL_MAX_DN (m/s; its auto descent
+        MPC_Z_V_AUTO_DN has the same 1.5 m/s default), ArduCopter WPNAV_SPEED_DN (cm/s, LAND_SPEED_HIGH 0)."""
+        p = self.state.params
+        return p["MPC_Z_VEL_MAX_DN"] if self.state.px4 else p["WPNAV_SPEED_DN"] / 100.0
+
     def apply_speed_params(self) -> None:
         """The vehicle envelope from the speed parameters (read every control cycle by the firmware, so a
         PARAM_SET changes the leg being flown): horizontal limit, climb rate, acceleration."""
@@ -76,7 +82,7 @@ class Motion:
         """Descend where the vehicle is at the land speed."""
         veh = self.state.veh
         veh.land()
-        veh.setpoint.land_speed = self.land_speed()
+        veh.setpoint.land_speed, veh.setpoint.land_speed_high = self.land_speed(), self.land_speed_high()
         self.state.takeoff_alt = None
 
     def track_posvel(self) -> None:
