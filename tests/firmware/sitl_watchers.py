@@ -307,7 +307,7 @@ def real_time_when_ready(conn: str, speedup: float = 1.0, timeout_s: float = 120
             target = (msg.get_srcSystem(), msg.get_srcComponent())
         if t == "SYS_STATUS" and msg.onboard_control_sensors_health & mavutil.mavlink.MAV_SYS_STATUS_PREARM_CHECK:
             ready = ready or now
-        if ready and now - asked > 0.5:
+        if ready and target and now - asked > 0.5:  # a streamed SYS_STATUS can come before the first HEARTBEAT
             m.mav.param_set_send(*target, b"SIM_SPEEDUP", float(speedup),
                                  mavutil.mavlink.MAV_PARAM_TYPE_REAL32)
             asked = now
