@@ -79,7 +79,7 @@ class Motion:
         self.goto_enu(np.array([s.position[0], s.position[1], st.home_enu[2] + st.takeoff_alt]))
 
     def start_land(self) -> None:
-        """Descend where the vehicle is at the land speed."""
+        """Descend where the vehicle is: at :meth:`land_speed_high` above 10 m, then at :meth:`land_speed` (m/s)."""
         veh = self.state.veh
         veh.land()
         veh.setpoint.land_speed, veh.setpoint.land_speed_high = self.land_speed(), self.land_speed_high()
