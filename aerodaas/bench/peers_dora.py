@@ -128,17 +128,35 @@ class DoraPipeline:
         self.log.flush()
         return Path(self.dir, "dora.log").read_text(errors="replace")[-1500:]
 
-    def window(self, seconds: float, settle_s: float = 0.5) -> list[dict]:
+    def window(self, seconds: float, settle_s: float = 0.5, drain_s: float = 30.0) -> list[dict]:
+        """Run the camera for ``seconds`` (wall s), then wait for the frames still in the pipeline: until no command
+        was applied for ``settle_s`` and at least one was since the last window, at most ``drain_s`` more (a loaded
+        machine can take longer than ``settle_s`` to move a frame through five processes). Returns the rows of the
+        commands applied since the last window. Raises RuntimeError when dora exited or no command was applied (the
+        log's tail in the message)."""
         self._set_window(time.monotonic() + seconds)
         time.sleep(seconds + settle_s)
+        rows = Path(self.dir, "rows.jsonl")
+        deadline, size = time.monotonic() + drain_s, -1
+        while time.monotonic() < deadline and self.proc.poll() is None:
+            now = rows.stat().st_size if rows.exists() else 0
+            if now == size and now > self._offset:
+                break
+            size = now
+            time.sleep(settle_s)
         if self.proc.poll() is not None:
             raise RuntimeError(f"dora run exited ({self.proc.returncode}): {self._log_tail()}")
-        with open(Path(self.dir, "rows.jsonl")) as f:
+        with open(rows) as f:
             f.seek(self._offset)
             text = f.read()
         complete = text[:text.rfind("\n") + 1]
         self._offset += len(complete)
-        return [json.loads(line) for line in complete.splitlines() if line]
+        out = [json.loads(line) for line in complete.splitlines() if line]
+        if not out:
+            waited = seconds + settle_s + drain_s
+            raise RuntimeError(f"dora-rs pipeline: no command reached the drone node in {waited:.1f} s: "
+                               f"{self._log_tail()}")
+        return out
 
     def close(self) -> None:
         if self.proc.poll() is None:
