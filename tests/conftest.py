@@ -102,7 +102,7 @@ SLOW_GROUPS = ("sitl", "rayup", "cluster", "faults", "video", "realtime", "label
 
 #: the development tier's longest files, longest first (worker-seconds each, 3 workers on this shared 2-core machine,
 #: 2026-11-26, load 6-36, mean 15.6: 262 s for the first down to 36 s for the last; 3,439 s in all, 1,224 s wall;
-#: test_layers.py's 131 s were before its fresh-import check stopped recompiling). ``--dist loadfile`` hands whole
+#: test_layers.py's 131 s were before its fresh-import check stopped recompiling). ``--dist loadgroup`` hands whole
 #: files to the workers in the collection's order, so these start first and the many short files fill in at the end:
 #: a longest-first schedule (files of 111 s and 91 s under tests/schedulers/, not listed before, were collected
 #: near the end). Only the order: a file missing here runs after them, a stale entry costs time, never a result
@@ -161,7 +161,7 @@ def slow_lane(item) -> str:
     return item.path.name
 
 
-#: the order of the files on an xdist worker (--dist loadfile and loadgroup hand units out in the collection's
+#: the order of the files on an xdist worker (--dist loadgroup and loadfile hand units out in the collection's
 #: order): the fault scenarios and the cluster lane (its first file is ``test_example_plugins.py``) first among the
 #: slow files, the development tier's longest files, then the rest of the slow files; a name missing here runs
 #: after them all. Both tiers in one run also works (every test has a lane) but is not what CI does
@@ -170,19 +170,38 @@ RANK = (SLOW_LONGEST_FIRST[:1] + ("test_example_plugins.py",) + LONGEST_FIRST
         + tuple(n for n in SLOW_LONGEST_FIRST[1:] if n not in LONGEST_FIRST))
 
 
+#: the development tier's files that mostly wait on a clock and start no Ray of their own: an emulated autopilot or
+#: Tello flown at its speed-up in the test's process, real-time video senders, a live-view client that stops reading.
+#: They use about a tenth of a core while they run (docs/results/test-tiers.md), so under ``pytest -n 4 --dist
+#: loadgroup`` they share one lane (:data:`WAITING_LANE`) on a fourth worker beside three that run the CPU-bound rest:
+#: the cores idle while a test waits are filled, and no more than three workers start actors and Ray sessions at
+#: once. A file listed here that has become CPU-bound only costs time
+WAITING_FILES = ("test_mavlink.py", "test_video_source.py", "test_tello.py", "test_mavlink_links.py",
+                 "test_mission_plan_ids.py", "test_signing_clis.py", "test_mavlink_speed_margin.py",
+                 "test_hitl_token_scope.py", "test_mavlink_fence.py", "test_mission_cli.py", "test_live_slow_client.py",
+                 "test_cloud_pool_losses.py", "test_channel.py")
+#: the name of that lane (an ``xdist_group``)
+WAITING_LANE = "waiting-lane"
+#: the lanes that come first in the collection, so that xdist hands each to a worker of its own at once
+FIRST_LANES = (REALTIME_LANE, WAITING_LANE)
+
+
 def lane(item) -> str:
-    """The ``xdist_group`` of any test: a slow test's :func:`slow_lane`, a development-tier test's file name. Under
-    ``--dist loadfile`` (the development tier) the marks change nothing; under ``--dist loadgroup`` (the slow tier,
-    or both tiers in one run) a development-tier file stays on one worker with its module fixtures, as under loadfile."""
-    return slow_lane(item) if item.get_closest_marker("slow") else item.path.name
+    """The ``xdist_group`` of any test: a slow test's :func:`slow_lane`; a development-tier test's file name, or
+    :data:`WAITING_LANE` for the files of :data:`WAITING_FILES`. Under ``--dist loadgroup`` (both tiers, as the README
+    runs them) a file stays on one worker with its module fixtures; under ``--dist loadfile`` the marks change
+    nothing."""
+    if item.get_closest_marker("slow"):
+        return slow_lane(item)
+    return WAITING_LANE if item.path.name in WAITING_FILES else item.path.name
 
 
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own hook, which reads the xdist_group marks set here
 def pytest_collection_modifyitems(config, items):
     """Mark every test of a slow group ``slow`` too, so that ``pytest -m "not slow"`` is the development tier
     (everything but SITL, ``ray up``, cluster, fault, video and real-time runs); CI runs everything. Every test gets
-    its lane (:func:`lane`, read by ``--dist loadgroup``). On an xdist worker, the real-time lane comes first, then
-    the files in :data:`RANK`'s order (the tests of a file keep theirs)."""
+    its lane (:func:`lane`, read by ``--dist loadgroup``). On an xdist worker, the real-time and waiting lanes come
+    first, then the files in :data:`RANK`'s order (the tests of a file keep theirs)."""
     for item in items:
         if any(item.get_closest_marker(g) for g in SLOW_GROUPS):
             item.add_marker(pytest.mark.slow)
@@ -191,8 +210,10 @@ def pytest_collection_modifyitems(config, items):
         rank: dict[str, int] = {}
         for i, name in enumerate(RANK):  # a name listed twice keeps its first place
             rank.setdefault(name, i)
-        items.sort(key=lambda item: (not any(m.args[:1] == (REALTIME_LANE,) for m in item.iter_markers("xdist_group")),
-                                     rank.get(item.path.name, len(rank))))
+        def first_lane(item) -> bool:
+            return any(m.args and m.args[0] in FIRST_LANES for m in item.iter_markers("xdist_group"))
+
+        items.sort(key=lambda item: (not first_lane(item), rank.get(item.path.name, len(rank))))
 
 
 @pytest.fixture(scope="session")

@@ -7,7 +7,7 @@ that ended loses under 0.2 s. Written per pytest process as JSON (``{nodeid: {"t
 tree, CPU-s of the pytest process itself, wall s) to ``$CPU_BY_TEST_OUT`` with the xdist worker's id before
 ``.json``::
 
-    PYTHONPATH=docs/bench CPU_BY_TEST_OUT=/tmp/cpu.json python3 -m pytest -p cpu_by_test -n 3 --dist loadfile \\
+    PYTHONPATH=docs/bench CPU_BY_TEST_OUT=/tmp/cpu.json python3 -m pytest -p cpu_by_test -n 4 --dist loadgroup \\
         -m "not slow" tests
     python3 docs/bench/cpu_by_test.py "/tmp/cpu.*.json"        # the costliest files and tests
 
