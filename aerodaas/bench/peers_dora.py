@@ -131,7 +131,7 @@ class DoraPipeline:
     def window(self, seconds: float, settle_s: float = 0.5, drain_s: float = 30.0) -> list[dict]:
         """Run the camera for ``seconds`` (wall s), then wait for the frames still in the pipeline: until no command
         was applied for ``settle_s`` and at least one was since the last window, at most ``drain_s`` more (a loaded
-        machine can take longer than ``settle_s`` to move a frame through five processes). Returns the rows of the
+        machine can take longer than ``settle_s`` to move a frame through the dataflow's nodes). Returns the rows of the
         commands applied since the last window. Raises RuntimeError when dora exited or no command was applied (the
         log's tail in the message)."""
         self._set_window(time.monotonic() + seconds)
