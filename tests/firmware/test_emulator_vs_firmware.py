@@ -141,13 +141,16 @@ def _compare(autopilot: str, fw: dict, emu: dict) -> None:
     assert emu["leg_max_speed"][0] > 3.0  # its own default, not a robot's limit
     assert emu["leg_max_speed"][1] is None or emu["leg_max_speed"][1] <= 2.0 * 1.1  # the PARAM_SET speed
     hold = inspect.signature(run_trace).parameters["hold"].default  # s at each waypoint (both traces use it)
-    for f, e in zip(fw["reached_first_after_arrival_s"], emu["reached_first_after_arrival_s"]):
-        # both report an item reached after (most of) its hold, never on arrival (the emulator's old behaviour,
-        # e ~ 0), and the emulator not noticeably after the firmware. Measured: PX4 SIH 2.06-2.62 s (its acceptance
-        # radius starts the hold before the trace's arrival), emulated 2.35-2.61; ArduCopter 4.5-5.0 s (its S-curve
-        # settles 1.5-2.5 s before the hold starts: unmodelled, ALLOWED above, and not bounded here), emulated 2.5-3.0
-        assert f is not None and e is not None and min(f, e) >= hold / 2 and e - f <= 1.0, (
-            fw["reached_first_after_arrival_s"], emu["reached_first_after_arrival_s"])
+    # the firmware reports an item reached at the end of its hold, which starts once inside its acceptance radius:
+    # where in the approach that is varies (the trace's arrival is the first position within 1 m). Measured: PX4 SIH
+    # 2.06-2.62 s after arrival, and 0.52 s once on the slow second leg beside load in CI; ArduCopter 4.5-5.0 s (its
+    # S-curve settles 1.5-2.5 s before the hold starts: unmodelled, ALLOWED above). The emulator: 2.23-2.61 s.
+    fw_reached, emu_reached = fw["reached_first_after_arrival_s"], emu["reached_first_after_arrival_s"]
+    assert None not in fw_reached and min(fw_reached) >= 0.0 and max(fw_reached) >= hold / 2, fw_reached
+    for e in emu_reached:
+        # the emulator reports after (most of) its hold, never on arrival (its old behaviour, e ~ 0), and not
+        # noticeably after the firmware did in the same run
+        assert e is not None and hold / 2 <= e <= max(fw_reached) + 1.0, (fw_reached, emu_reached)
     assert min(emu["reached_count"]) >= (1 if autopilot == "ardupilot" else 2)
     # the armed flight's modes and the mode after landing (ArduCopter: GUIDED, AUTO, RTL, stays RTL; PX4:
     # TAKEOFF, LOITER, MISSION, LOITER, RTL, then LOITER disarmed); before that only the cold arm differs
