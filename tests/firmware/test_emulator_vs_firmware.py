@@ -146,7 +146,8 @@ def _compare(autopilot: str, fw: dict, emu: dict) -> None:
     # 2.06-2.62 s after arrival, and 0.52 s once on the slow second leg beside load in CI; ArduCopter 4.5-5.0 s (its
     # S-curve settles 1.5-2.5 s before the hold starts: unmodelled, ALLOWED above). The emulator: 2.23-2.61 s.
     fw_reached, emu_reached = fw["reached_first_after_arrival_s"], emu["reached_first_after_arrival_s"]
-    assert None not in fw_reached and min(fw_reached) >= 0.0 and max(fw_reached) >= hold / 2, fw_reached
+    # each item reported (when, relative to the trace's arrival, is the firmware's), one after most of its hold
+    assert None not in fw_reached and max(fw_reached) >= hold / 2, fw_reached
     for e in emu_reached:
         # the emulator reports after (most of) its hold, never on arrival (its old behaviour, e ~ 0), and not
         # noticeably after the firmware did in the same run
