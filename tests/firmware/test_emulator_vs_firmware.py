@@ -81,7 +81,8 @@ ALLOWED = {
         "leg_max_speed": "the emulator's acceleration profile is simpler than PX4's jerk-limited one",
         "reached_count": "PX4 repeats MISSION_ITEM_REACHED while the trace listens; how many arrive depends on when "
                          "the next leg ends (>= 2 in both)",
-        "reached_first_after_arrival_s": "within the acceptance radius the hold starts a little earlier or later",
+        "reached_first_after_arrival_s": "the hold starts inside the acceptance radius, 0.4-2.5 s before the 1 m "
+                                         "arrival in the runs seen",
         "home_alt_drift_m": "PX4's home correction follows its baro/GPS disagreement; the emulator's is a bounded "
                             "random walk",
     },
@@ -144,7 +145,8 @@ def _compare(autopilot: str, fw: dict, emu: dict) -> None:
     # the firmware reports an item reached at the end of its hold, which starts once inside its acceptance radius:
     # where in the approach that is varies (the trace's arrival is the first position within 1 m). Measured: PX4 SIH
     # 2.06-2.62 s after arrival, and 0.52 s once on the slow second leg beside load in CI; ArduCopter 4.5-5.0 s (its
-    # S-curve settles 1.5-2.5 s before the hold starts: unmodelled, ALLOWED above). The emulator: 2.23-2.61 s.
+    # S-curve settles 1.5-2.5 s before the hold starts: unmodelled, ALLOWED above). The emulator: PX4 2.23-2.61 s,
+    # ArduCopter 2.5-3.0 s.
     fw_reached, emu_reached = fw["reached_first_after_arrival_s"], emu["reached_first_after_arrival_s"]
     # each item reported (when, relative to the trace's arrival, is the firmware's), one after most of its hold
     assert None not in fw_reached and max(fw_reached) >= hold / 2, fw_reached
