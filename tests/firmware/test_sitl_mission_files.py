@@ -52,11 +52,7 @@ def _session(autopilot: str, name: str, workdir: Path) -> dict:
     download = " ".join(shlex.quote(a) for a in [*sitl.AERODAAS, "mission", "download", "--out",
                                                   str(workdir / "back.waypoints"), "--connection", conn,
                                                   "--timeout", "60"])
-    # PX4 SIH at 2x, not 5x: at 5x on the loaded machine (load 19) it lost its sensors in flight ("No valid data
-    # from Baro 0", mc_pos_control "Failsafe: blind land") and drifted 33 km (2026-11-26)
-    speedup = 2.0 if autopilot == "px4" else None
-    sitl.run_in_namespace(autopilot, workdir, [follower + upload, wait, download], home=home, timeout_s=1200,
-                          speedup=speedup)
+    sitl.run_in_namespace(autopilot, workdir, [follower + upload, wait, download], home=home, timeout_s=1200)
     out = {k: sitl.step_result(workdir, i) for i, k in enumerate(("upload", "wait", "download"))}
     out["flight"] = json.loads(flight.read_text()) if flight.exists() else {}
     out.update(items=items, first=first, home=home, path=path, workdir=workdir)
