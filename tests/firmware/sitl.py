@@ -391,13 +391,13 @@ FARM_APP = REPO / "apps" / "farm_survey.py"
 SURVEY_APP = Path(__file__).with_name("sitl_survey_app.py")
 
 
-def survey_step(autopilot: str, env: Path, record: Path) -> str:
+def survey_step(autopilot: str, env: Path, record: Path, corners: int = 4) -> str:
     """The farm survey for ``autopilot``: apps/farm_survey.py itself where the firmware holds its 0.3 m
-    (ArduCopter), else tests/firmware/sitl_survey_app.py with :data:`HOLD_RADIUS`."""
-    radius = HOLD_RADIUS[autopilot]
-    if radius == 0.3:
+    (ArduCopter), else tests/firmware/sitl_survey_app.py with :data:`HOLD_RADIUS`; ``corners``: of the four."""
+    if HOLD_RADIUS[autopilot] == 0.3 and corners == 4:
         return aerodaas_run(FARM_APP, env, record)
-    return aerodaas_run(SURVEY_APP, env, record, hold_radius_m=radius)
+    return ("" if corners == 4 else f"AERODAAS_SITL_CORNERS={corners:d} ") + aerodaas_run(
+        SURVEY_APP, env, record, hold_radius_m=HOLD_RADIUS[autopilot])
 FARM_ENV = REPO / "apps" / "farm_survey.json"
 FARM_CORNERS = [(0.0, 0.0, 1.5), (0.0, 10.0, 1.5), (10.0, 10.0, 1.5), (10.0, 0.0, 1.5)]
 FLEET_APP = Path(__file__).with_name("sitl_fleet_app.py")
@@ -466,7 +466,7 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
     scenarios.update({name: [survey_step(autopilot, env_auto, workdir / f"{name}.mcap")] for name in again})
     if autopilot == "px4":  # PX4's offboard-loss failsafe; ArduCopter has none in GUIDED with stock parameters
         scenarios["failsafe"] = [freezer + survey_step(autopilot, env_guided, workdir / "failsafe.mcap")]
-        # the farm survey's own 0.5 m/s on stock PX4 SIH, with SIH's ground truth observed: a limit that cannot hold
+        # the farm survey's own 0.5 m/s on stock PX4 SIH, SIH's truth observed: a limit that cannot hold; one leg
         slow = small_cameras(mavlink_env(autopilot, FARM_ENV))
         slow["robots"][0]["limits"]["max_speed"] = 0.5
         def observed(name: str, step: str, stop: str = "") -> str:  # with SIH's truth beside it (truth_<name>.json)
@@ -475,7 +475,7 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
                     f"{stop} > {shlex.quote(str(workdir / f'truth_{name}.log'))} 2>&1 & ) ; {step}; rc=$?; for k in "
                     f"$(seq 1 80); do [ -e {f} ] && break; [ $k = 60 ] && pkill -TERM -f {f}; sleep 0.5; done; exit $rc")
         scenarios["slow"] = [observed("slow", survey_step(autopilot, _write_env(workdir / "slow.json", slow),
-                                                          workdir / "slow.mcap"))]
+                                                          workdir / "slow.mcap", corners=2))]
         for name in ("guided", "auto"):  # ... and the surveys at MAX_SPEED; the link loss's stop by the observer
             scenarios[name] = [observed(name, scenarios[name][0])]
         scenarios["linkloss"] = [observed("linkloss", survey_step(autopilot, env_guided, workdir / "linkloss.mcap"),

@@ -22,7 +22,7 @@ KNOWN_GAPS: set[str] = set()
 
 
 def test_a_limit_stock_px4_cannot_hold_is_reported(session):
-    """The farm survey at its own max_speed 0.5 m/s on stock PX4 SIH: the backend's in-flight margin (GNSS speed
+    """The farm survey's first leg at its own max_speed 0.5 m/s on stock PX4 SIH: the backend's in-flight margin (GNSS speed
     minus the estimate's, p99) leaves no limit above PX4's floor (0.25 m/s) within 0.55 m/s, so it reports
     ``speed_limit_unholdable`` once and the summary says so; SIH's own ground truth (HIL_STATE_QUATERNION against
     the estimate, GLOBAL_POSITION_INT, airborne) agrees: the vehicle flew more than 0.3 m/s faster than its
