@@ -453,7 +453,7 @@ if __name__ == "__main__":
     if sys.argv[1] == "px4-intersects":
         sys.exit(px4_intersects(sys.argv[2], sys.argv[3], h))
     if sys.argv[1] == "kill-and-push":
-        # optional 5th argument: the push's wall seconds (default 25: ~125 s of firmware time at 5x)
+        # optional 5th argument: the push's wall seconds (default 25; tests/firmware/test_sitl_fence.py PUSH_FIRMWARE_S)
         sys.exit(kill_and_push(sys.argv[2], int(sys.argv[3]), sys.argv[4], h,
                                **({"push_s": float(sys.argv[5])} if len(sys.argv) > 5 else {})))
     raise SystemExit(f"unknown command {sys.argv[1]!r}")
