@@ -218,7 +218,9 @@ def test_analytics_actor_killed_mid_mission_restarts_and_navigation_resumes(ray_
         assert not res.analytics_lost and res.outcome == "ended"
         times = _log_times(run_options.record)
         frames, dets = times["/d00/camera/cam"], times["/d00/always_car/detections"]
-        assert len(dets) >= len(frames) - 2, (len(frames), len(dets))  # the frames after the restart were analysed
+        # the frames after the restart were analysed: all but those counted failed at the kill and the one frame
+        # whose cascade was still open when the test ended the mission (recorded, its detection not yet made)
+        assert len(dets) >= len(frames) - outlet["failed"] - 1, (len(frames), len(dets), outlet)
         # simulated time did not run on past the outage without analytics: no hole in the detections' sim time
         # wider than the frame(s) in flight at the kill (frames every 0.1 s)
         gaps = np.diff(np.asarray(dets, np.int64)) / 1e9
