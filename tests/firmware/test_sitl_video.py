@@ -2,8 +2,8 @@
 from GStreamer's RTSP server (gst-rtsp-server) and from raw RTP H.264 on UDP 5600 as QGroundControl
 receives it, both fed with real aerial footage by a sender in the same private loopback-only network namespace as
 the firmware. The firmware flies in real time (speed-up 1: a stream runs on the wall clock, as on a real drone; it
-boots at 10x until its pre-arm checks pass) with its default parameters plus what our backend sets, and the app's
-own limits.
+boots at 10x until its pre-arm checks pass) with its default parameters plus what our backend sets, and the
+stream tests' quick limits (``tests/video/video_rig.py`` ``QUICK_LIMITS``).
 
 Judged from the recording: the detector's detections of the footage's cars, the follow analytics' navigation
 commands, the firmware's own odometry after them (the vehicle flew), every frame taken from the stream recorded or
@@ -20,7 +20,7 @@ import pytest
 from aerodaas.recording.metrics import load_run
 from tests.firmware import sitl
 from tests.conftest import REPO, needs_data, skip_or_fail
-from tests.video.video_rig import check_stream_recording, make_footage
+from tests.video.video_rig import QUICK_LIMITS, check_stream_recording, make_footage
 
 pytestmark = [pytest.mark.sitl, pytest.mark.timeout(1800)]
 
@@ -50,7 +50,8 @@ def _flight(tmp: Path, scheme: str) -> tuple[int | None, str, Path]:
     cfg = sitl.mavlink_env("ardupilot", REPO / "apps" / "vehicle_tracking.json")
     robot = cfg["robots"][0]
     app_robot = json.loads((REPO / "apps" / "vehicle_tracking.json").read_text())["robots"][0]
-    robot["limits"] = app_robot["limits"]  # the app's own limits (not the farm survey's SITL speed)
+    # the app's limits, at the stream tests' pace (not the farm survey's SITL speed): the stream is under test
+    robot["limits"] = {**app_robot["limits"], **QUICK_LIMITS}
     robot["home"] = dict(sitl.FARM_HOME)  # where the firmware boots
     robot["sensors"][0]["properties"]["source"] = url
     cfg["simulation"] = {"speedup": 1, "lockstep": False, "physics_hz": 50}
