@@ -21,10 +21,10 @@ pytestmark = [pytest.mark.sitl, needs_sitl]  # no firmware or namespace: skipped
 HOME = sitl.FARM_HOME
 #: the kill scenario's inclusion circle around home (m) and altitude fence (m above home)
 RADIUS_M = 20.0
+MAX_ALT_M = 30.0
 #: the kill test's push, in firmware seconds (wall seconds x speed-up): ArduCopter came to the boundary 6.6 s into
 #: it and then stood (the test asks for its last 5 s still); PX4's ends once its geofence has acted
 PUSH_FIRMWARE_S = {"ardupilot": 50.0, "px4": 125.0}
-MAX_ALT_M = 30.0
 
 
 def _ll(e: float, n: float) -> list[float]:
