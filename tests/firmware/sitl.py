@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from tests.firmware.firmware_boot import boot_check
+from tests.firmware.sih_sensors import fly_scenario
 
 REPO = Path(__file__).resolve().parents[2]
 SITL_DIR = Path(os.environ.get("AERODAAS_SITL_DIR", REPO.parent / "shared" / "sitl"))
@@ -216,8 +217,7 @@ def run_in_namespace(autopilot: str, workdir: Path, steps: list[str], n: int = 1
 
 def step_result(workdir: Path, k: int) -> tuple[int | None, str]:
     """(exit code, output) of step ``k`` of :func:`run_in_namespace` (None: it never finished)."""
-    rc = workdir / f"rc{k}"
-    out = workdir / f"out{k}"
+    rc, out = workdir / f"rc{k}", workdir / f"out{k}"
     return (int(rc.read_text()) if rc.exists() else None), (out.read_text(errors="replace") if out.exists() else "")
 
 
@@ -485,7 +485,7 @@ def single_vehicle_session(autopilot: str, workdir: Path, only: tuple[str, ...] 
         if only is not None and name not in only:
             continue
         d = workdir / again.get(name, name)
-        run_in_namespace(autopilot, d, steps, with_firmware=name != "fence")
+        fly_scenario(run_in_namespace, autopilot, d, steps, with_firmware=name != "fence", fresh=name not in again)
         for k, step in enumerate(steps):
             rc, text = step_result(d, k)
             out[name if k == 0 else "observe"] = {"rc": rc, "out": text}
