@@ -16,15 +16,21 @@ from pathlib import Path
 from typing import Callable
 
 #: what PX4 logs once its simulated barometer has stopped (also as the firmware is killed after a run: judged only
-#: for a run that failed)
+#: before the vehicle's disarm, :data:`DISARMED`, and only for a run that failed)
 SIH_SENSORS_STOPPED = "Preflight Fail: No valid data from Baro 0"
+#: what PX4 logs at the disarm that ends a flight
+DISARMED = "Disarmed by"
 
 
 def sih_sensors_stopped(run_dir: Path) -> bool:
-    """PX4 SIH's simulated sensors stopped in the run in ``run_dir`` (its ``fw0.log`` holds
-    :data:`SIH_SENSORS_STOPPED`)."""
+    """PX4 SIH's simulated sensors stopped in flight in the run in ``run_dir``: its ``fw0.log`` holds
+    :data:`SIH_SENSORS_STOPPED` before the first :data:`DISARMED` (or with none)."""
     log = run_dir / "fw0.log"
-    return log.exists() and SIH_SENSORS_STOPPED in log.read_text(errors="replace")
+    if not log.exists():
+        return False
+    text = log.read_text(errors="replace")
+    at, disarm = text.find(SIH_SENSORS_STOPPED), text.find(DISARMED)
+    return at >= 0 and (disarm < 0 or at < disarm)
 
 
 def fly_scenario(run: Callable[..., object], autopilot: str, run_dir: Path, steps: list[str], *,

@@ -13,17 +13,18 @@ class FakeRun:
     """Stands in for ``run_in_namespace``: attempt k writes ``rc0`` = ``rcs[k]``, its firmware log (with
     :data:`SIH_SENSORS_STOPPED` where ``stopped[k]``) and a recording beside the run folder."""
 
-    def __init__(self, rcs: list[int], stopped: list[bool]) -> None:
-        self.rcs, self.stopped, self.calls = rcs, stopped, 0
+    def __init__(self, rcs: list[int], stopped: list[bool], after_disarm: bool = False) -> None:
+        self.rcs, self.stopped, self.after_disarm, self.calls = rcs, stopped, after_disarm, 0
 
     def __call__(self, autopilot: str, run_dir: Path, steps: list[str], *, with_firmware: bool) -> None:
         k = self.calls
         self.calls += 1
         run_dir.mkdir(parents=True, exist_ok=True)
         (run_dir / "rc0").write_text(f"{self.rcs[k]}\n")
+        stop = f"WARN  [health_and_arming_checks] {SIH_SENSORS_STOPPED}\n" if self.stopped[k] else ""
+        disarm = "INFO  [commander] Disarmed by external command\n"
         (run_dir / "fw0.log").write_text("INFO  [commander] Armed by external command\n"
-                                          + (f"WARN  [health_and_arming_checks] {SIH_SENSORS_STOPPED}\n"
-                                             if self.stopped[k] else ""))
+                                          + (disarm + stop if self.after_disarm else stop + disarm))
         (run_dir.parent / "guided.mcap").write_text(f"attempt {k}")
 
 
@@ -54,5 +55,13 @@ def test_a_second_stop_is_not_flown_a_third_time(tmp_path):
 ])
 def test_any_other_run_is_flown_once(tmp_path, autopilot, rc, stopped, fresh):
     run = FakeRun(rcs=[rc], stopped=[stopped])
+    assert not fly_scenario(run, autopilot, tmp_path / "s", ["step"], with_firmware=True, fresh=fresh)
+    assert run.calls == 1 and not (tmp_path / "s_sih_sensors_stopped").exists()
+
+
+def test_a_failed_run_whose_sensors_stopped_only_after_the_disarm_is_flown_once(tmp_path):
+    """The message as the firmware is killed after a flight that failed for another reason."""
+    run = FakeRun(rcs=[1], stopped=[True], after_disarm=True)
+    fresh, autopilot = True, "px4"
     assert not fly_scenario(run, autopilot, tmp_path / "s", ["step"], with_firmware=True, fresh=fresh)
     assert run.calls == 1 and not (tmp_path / "s_sih_sensors_stopped").exists()
