@@ -148,12 +148,12 @@ CLUSTER_FILES = ("test_persistent_cluster.py", "test_example_plugins.py", "test_
 
 
 def slow_lane(item) -> str:
-    """The ``xdist_group`` of a slow test under ``pytest -m slow -n 2 --dist loadgroup`` (CI): every real-time test
+    """The ``xdist_group`` of a slow test under ``--dist loadgroup`` (CI: both tiers on 3 workers): every real-time test
     (:data:`REALTIME_GROUPS`) in :data:`REALTIME_LANE`, so one worker runs them one after the other, never two at
     once; any other test with the rest of its file (its module fixtures start once: a Ray cluster, a firmware
-    boot), the files handed to the other worker as it frees up; multi-node and persistent clusters in
+    boot), the files handed to the other workers as they free up; multi-node and persistent clusters in
     :data:`CLUSTER_LANE`, one at a time. The real-time lane comes first in the collection,
-    so xdist starts it at once and it ends about when the other worker's files do."""
+    so xdist starts it at once and it ends about when the other workers' files do."""
     if any(item.get_closest_marker(g) for g in REALTIME_GROUPS):
         return REALTIME_LANE
     if any(item.get_closest_marker(g) for g in CLUSTER_GROUPS) or item.path.name in CLUSTER_FILES:
@@ -164,8 +164,7 @@ def slow_lane(item) -> str:
 #: the order of the files on an xdist worker (--dist loadgroup and loadfile hand units out in the collection's
 #: order): the fault scenarios and the cluster lane (its first file is ``test_example_plugins.py``) first among the
 #: slow files, the development tier's longest files, then the rest of the slow files; a name missing here runs
-#: after them all. Both tiers in one run also works (every test has a lane) but is not what CI does
-#: (docs/architecture.md, Development loop)
+#: after them all. CI runs both tiers in one run (every test has a lane; docs/architecture.md, Development loop)
 RANK = (SLOW_LONGEST_FIRST[:1] + ("test_example_plugins.py",) + LONGEST_FIRST
         + tuple(n for n in SLOW_LONGEST_FIRST[1:] if n not in LONGEST_FIRST))
 
