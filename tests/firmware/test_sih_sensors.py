@@ -62,6 +62,5 @@ def test_any_other_run_is_flown_once(tmp_path, autopilot, rc, stopped, fresh):
 def test_a_failed_run_whose_sensors_stopped_only_after_the_disarm_is_flown_once(tmp_path):
     """The message as the firmware is killed after a flight that failed for another reason."""
     run = FakeRun(rcs=[1], stopped=[True], after_disarm=True)
-    fresh, autopilot = True, "px4"
-    assert not fly_scenario(run, autopilot, tmp_path / "s", ["step"], with_firmware=True, fresh=fresh)
+    assert not fly_scenario(run, "px4", tmp_path / "s", ["step"], with_firmware=True, fresh=True)
     assert run.calls == 1 and not (tmp_path / "s_sih_sensors_stopped").exists()
