@@ -186,9 +186,14 @@ class Harness:
                 self._poll_at = at
                 self._push(at, "poll", at)
 
-    def run(self, trace: list[AnalyticsTask], *, max_events: int = 2_000_000) -> Result:
+    def run(self, trace: list[AnalyticsTask], *, max_events: int = 2_000_000,
+            until_ms: float | None = None) -> Result:
         """Run the trace to the end; every task ends in exactly one terminal state. Raises RuntimeError after
-        ``max_events`` events (a policy polling in a loop)."""
+        ``max_events`` events (a policy polling in a loop).
+
+        ``until_ms``: stop before the first event at or after this simulated time (ms). The result's log and edge
+        starts are then exactly the full run's before ``until_ms`` (no event schedules another before its own time),
+        and nothing after: no end-of-run terminations, tasks left as they stand."""
         self.res = Result(trace, 0.0, Counter(), Counter())
         for t in trace:
             self._push(t.arrival_ms, "arrive", t)
@@ -197,6 +202,8 @@ class Harness:
             self._push(t1, "cloud", True)
         n = 0
         while self._events:
+            if until_ms is not None and self._events[0][0] >= until_ms:
+                return self.res
             n += 1
             if n > max_events:
                 raise RuntimeError(f"{self.p.name}: more than {max_events} events (a poll loop?)")

@@ -126,6 +126,29 @@ def test_counters_explain_steals_jit_releases_and_cloud_use():
 
 
 @needs_workload
+@pytest.mark.parametrize("name", ["DEMS", "LAPLAN"])
+def test_a_run_stopped_at_a_time_is_the_full_run_before_it(name):
+    """``until_ms``: the log and edge starts before the stop are exactly the full run's, and nothing at or after it
+    (the non-anticipation test compares its post-cut runs only before their cut)."""
+    w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
+    trace = make_trace(w, drones=3, duration_s=8, seed=5, jitter_ms=250.0)
+
+    def run(until_ms=None):
+        pol = make_analytics_scheduler(name, w)
+        h = Harness(pol, cloud_jitter=Jitter("lognormal", 0.2), edge_jitter=Jitter("lognormal", 0.05), seed=5)
+        return h.run([AnalyticsTask(t.task_id, t.drone, t.model, t.arrival_ms, t.deadline_ms) for t in trace],
+                     until_ms=until_ms)
+
+    full = run()
+    for cut in (1500.0, 4000.0, trace[len(trace) // 2].arrival_ms):
+        part = run(cut)
+        assert part.log == [e for e in full.log if e[0] < cut] and part.log
+        assert [(t.task_id, s) for t, s in part.edge_starts] == [(t.task_id, s) for t, s in full.edge_starts
+                                                                 if s < cut]
+        assert len(part.log) < len(full.log)
+
+
+@needs_workload
 def test_reference_eviction_scan_is_the_default_and_full_is_an_option():
     w = Workload.from_file(WORKLOAD_JSON, "HEAVY")
     trace = make_trace(w, drones=3, duration_s=20, seed=1)

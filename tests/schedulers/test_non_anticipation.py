@@ -88,10 +88,11 @@ def _copy(tasks):
     return [AnalyticsTask(t.task_id, t.drone, t.model, t.arrival_ms, t.deadline_ms) for t in tasks]
 
 
-def _run(policy, w, trace, cut, seed, alt_seed) -> Result:
-    """One run. ``policy``: a registered name or ``"module:Class"`` (isolated: a fresh process) or a class (in the
-    harness's process, handed the trace and the harness if it has ``peek``)."""
-    pol = IsolatedPolicy(policy, w) if isinstance(policy, str) else policy(w)
+def _run(policy, w, trace, cut, seed, alt_seed, until_ms: float | None = None, options: dict | None = None) -> Result:
+    """One run. ``policy``: a registered name or ``"module:Class"`` (isolated: a fresh process, built with
+    ``options``) or a class (in the harness's process, handed the trace and the harness if it has ``peek``).
+    ``until_ms``: the run stops there (:meth:`Harness.run`; a post-cut run is compared only before its cut)."""
+    pol = IsolatedPolicy(policy, w, options) if isinstance(policy, str) else policy(w)
     # admit_probes False: the cloud re-check asked once, at the send time (what decides the send), not bisected
     # into an admit-by time: a pipe round trip per call to an isolated policy
     h = CutHarness(pol, cut=cut, alt_seed=alt_seed, edge_jitter=Jitter("lognormal", 0.05),
@@ -100,7 +101,7 @@ def _run(policy, w, trace, cut, seed, alt_seed) -> Result:
     if hasattr(pol, "peek"):
         pol.peek(trace, h)
     try:
-        return h.run(trace)
+        return h.run(trace, until_ms=until_ms)
     finally:
         if isinstance(pol, IsolatedPolicy):
             pol.close()
@@ -175,13 +176,14 @@ def cut_trace(w, seed: int, kind: str | None = None, *, drones: int = 3, duratio
 
 
 def check(policy, w, *, secret: bool = True, warm_up: bool = True, every: int = 1, n_arrivals: int = 8,
-          kind: str | None = None, drones: int = 3, duration_s: float = DURATION_S) -> Check:
+          kind: str | None = None, drones: int = 3, duration_s: float = DURATION_S,
+          options: dict | None = None) -> Check:
     """Run ``policy`` (see :func:`_run`) through the cut comparison. ``secret`` False: the old protocol's public
     seeds (:data:`PUBLIC`), the same re-draw seed at every cut. ``warm_up``: one run before the reference run (its
     own secrets, or, publicly, the reference run's own seeds: what a cross-run cache needs to pass). ``every``: use
     every n-th cut only. ``n_arrivals``: how many arrivals get a cut just before them (see :func:`cuts`).
     ``kind``, ``drones``, ``duration_s``: the traces (see :func:`cut_trace`; the post-cut future is another trace of
-    the same kind). A bursty kind's cuts begin 1 s after its first frame (the first seconds can be silent: nothing
+    the same kind). ``options``: the isolated policy's (its constructor's keywords). A bursty kind's cuts begin 1 s after its first frame (the first seconds can be silent: nothing
     decided before a cut there), its trace is re-drawn (another secret) until it has a burst and a silence after
     that, and it gets cuts inside both (:func:`shape_cuts`)."""
     trace_seed, seed = _trace_seed(secret, PUBLIC[0]), (secret_seed() if secret else PUBLIC[1])
@@ -197,8 +199,8 @@ def check(policy, w, *, secret: bool = True, warm_up: bool = True, every: int = 
         assert shape["burst"] and shape["silence"], f"no {kind} trace with a burst and a silence: {shape}"
     if warm_up:
         wt = a if not secret else cut_trace(w, _trace_seed(True, 0), kind, drones=drones, duration_s=duration_s)
-        _run(policy, w, wt, None, secret_seed() if secret else seed, None)
-    ra = _run(policy, w, a, None, seed, None)
+        _run(policy, w, wt, None, secret_seed() if secret else seed, None, options=options)
+    ra = _run(policy, w, a, None, seed, None, options=options)
     flagged = []
     start_ms = 1000.0 if kind is None else a[0].arrival_ms + 1000.0
     points = sorted(cuts(a, n_arrivals=n_arrivals, start_ms=start_ms)[::every] + shape.get("burst", [])
@@ -210,7 +212,7 @@ def check(policy, w, *, secret: bool = True, warm_up: bool = True, every: int = 
                       for i, t in enumerate(t for t in other if t.arrival_ms >= cut)]
         assert [(t.drone, t.model, t.arrival_ms) for t in a[len(prefix):]] != \
             [(t.drone, t.model, t.arrival_ms) for t in b[len(prefix):]]      # the futures really differ
-        rb = _run(policy, w, b, cut, seed, secret_seed() if secret else PUBLIC[2])
+        rb = _run(policy, w, b, cut, seed, secret_seed() if secret else PUBLIC[2], until_ms=cut, options=options)
         before_a = _before(ra, cut)
         # not a vacuous comparison: a decision logged or an edge start before the cut (an edge-only policy logs a
         # task when it ends, and with a secret trace seed the first end can come after an early cut)
