@@ -69,15 +69,16 @@ PEERS = ("bare_loop", "naive_ray", "dora_rs", "dora_rs_grouped")
 
 class FrameworkWindows:
     """The AeroDaaS runtime in ``layout`` (see the module docstring): each :meth:`window` flies one mission of
-    ``seconds`` after take-off in the current Ray (the run's actors are started per mission), recorded to a
-    temporary MCAP when ``record_dir`` is set. Returns the scheduler's latency records of applied commands plus the
-    camera's dispatch figures."""
+    ``seconds`` after take-off (a climb at 4 m/s to the hover altitude) and ``settle_s`` more seconds, in the current
+    Ray (the run's actors are started per mission), recorded to a temporary MCAP when ``record_dir`` is set. Returns
+    the scheduler's latency records of applied commands plus the camera's dispatch figures."""
 
     name = "framework"
 
     def __init__(self, width: int, height: int, kind: str, stub_ms: float, record_dir: str | None,
-                 layout: str = "colocated") -> None:
+                 layout: str = "colocated", settle_s: float = 4.0) -> None:
         self.args, self.record_dir, self.layout = (width, height, kind, stub_ms), record_dir, layout
+        self.settle_s = settle_s
         self.n, self.info = 0, {"frames_captured": 0, "frames_dropped_busy_detector": 0, "host_errors": 0,
                                 "dispatch": [], "recording_bytes": 0, "transports": set()}
 
@@ -98,7 +99,7 @@ class FrameworkWindows:
                                            priority=1))
         self.n += 1
         rec = os.path.join(self.record_dir, f"w{self.n}.mcap") if self.record_dir else None
-        res = drone.start_mission(timeout=seconds + HOVER_M / 4.0 + 4.0,  # climb at 4 m/s, then settle
+        res = drone.start_mission(timeout=seconds + HOVER_M / 4.0 + self.settle_s,  # climb at 4 m/s, then settle
                                   options=RunOptions(progress=False, record=rec))
         cam = res.stats["uav"]["cameras"]["cam"]
         i = self.info
@@ -200,19 +201,21 @@ def _peer(name: str, width: int, height: int, kind: str, stub_ms: float) -> tupl
 
 def interleaved(width: int, height: int, kind: str, duration_s: float, window_s: float, stub_ms: float,
                 record_dir: str | None, loads: list[float], layouts: tuple[str, ...] = ("colocated",),
-                on_round: Any = None) -> dict:
+                on_round: Any = None, settle_s: float = 4.0) -> dict:
     """Every pipeline for ``duration_s`` seconds in round-robin windows of ``window_s`` (order rotated each round,
     ``on_round()`` called after each round: the progress bar;
     one unmeasured warm-up window first for the peers). Returns ``{name: report}``; an unavailable pipeline's report,
     or a peer's that failed during the run (its windows are then discarded), is ``{"available": False, "reason":
     ...}``; the framework failing raises. When
     recording (``record_dir``), an unrecorded AeroDaaS runner joins the rotation (``framework_unrecorded``), so the
-    recording's cost shows side by side. The runtime is flown in each of ``layouts`` (``framework:<layout>``)."""
+    recording's cost shows side by side. The runtime is flown in each of ``layouts`` (``framework:<layout>``), each
+    mission ``settle_s`` seconds at its altitude before its window (:class:`FrameworkWindows`)."""
     runners: dict[str, Any] = {}
     for layout in layouts:
-        runners[f"framework:{layout}"] = FrameworkWindows(width, height, kind, stub_ms, record_dir, layout)
+        runners[f"framework:{layout}"] = FrameworkWindows(width, height, kind, stub_ms, record_dir, layout, settle_s)
         if record_dir:
-            runners[f"framework_unrecorded:{layout}"] = FrameworkWindows(width, height, kind, stub_ms, None, layout)
+            runners[f"framework_unrecorded:{layout}"] = FrameworkWindows(width, height, kind, stub_ms, None, layout,
+                                                                         settle_s)
     missing: dict[str, str] = {}
     failed: dict[str, str] = {}
     try:
@@ -289,7 +292,10 @@ def _row(width: int, height: int, kind: str, layout: str, rep: dict) -> dict:
 
 def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[str, ...] = ("stub", "yolox"),
                  resolutions: tuple[tuple[int, int], ...] = RESOLUTIONS, layouts: tuple[str, ...] = ("colocated",),
-                 window_s: float = 5.0, record: bool = False) -> dict:
+                 window_s: float = 5.0, record: bool = False, settle_s: float = 4.0) -> dict:
+    """The benchmark's report (see the module docstring): every pipeline, per detector kind and resolution,
+    ``duration_s`` seconds in windows of ``window_s``; each AeroDaaS mission flies ``settle_s`` seconds at its
+    altitude before its window. Starts and stops its own local Ray."""
     machine = machine_info()
     ray_start.ensure_ray()
 
@@ -302,7 +308,7 @@ def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[s
                 for wdt, hgt in resolutions:
                     progress.update(task, description=f"bench overhead {kind} {wdt}x{hgt}")
                     rep = interleaved(wdt, hgt, kind, duration_s, window_s, stub_ms, record_dir, loads, layouts,
-                                      on_round=lambda: progress.advance(task))
+                                      on_round=lambda: progress.advance(task), settle_s=settle_s)
                     for layout in layouts:
                         row = _row(wdt, hgt, kind, layout, rep)
                         results.append(row)
@@ -312,7 +318,7 @@ def run_overhead(duration_s: float = 20.0, stub_ms: float = 10.0, kinds: tuple[s
         if record_dir:
             shutil.rmtree(record_dir, ignore_errors=True)
     return {"benchmark": "overhead", "machine": machine, "duration_s": duration_s, "window_s": window_s,
-            "stub_ms": stub_ms, "recorded": record, "layouts": list(layouts),
+            "settle_s": settle_s, "stub_ms": stub_ms, "recorded": record, "layouts": list(layouts),
             "load": {"load_avg_1min_at_windows": {**summary(loads), "min": min(loads, default=None),
                                                   "max": max(loads, default=None)},
                      "load_avg_1min_end": round(os.getloadavg()[0], 2)},
@@ -359,6 +365,9 @@ def main(a: argparse.Namespace) -> int:
     if a.stub_ms < 0:
         print(f"aerodaas bench overhead: --stub-ms must be >= 0, got {a.stub_ms}", file=sys.stderr)
         return 2
+    if not a.settle >= 0:
+        print(f"aerodaas bench overhead: --settle must be >= 0 seconds, got {a.settle}", file=sys.stderr)
+        return 2
     kinds = ("stub", "yolox") if a.detector == "both" else (a.detector,)
     if "yolox" in kinds:
         try:
@@ -373,5 +382,5 @@ def main(a: argparse.Namespace) -> int:
     if a.lockstep and f"actors{LOCKSTEP}" not in layouts:
         layouts = (*layouts, f"actors{LOCKSTEP}")
 
-    emit_report(run_overhead(a.duration, a.stub_ms, kinds, res, layouts, a.window, a.record), a.out, a.json)
+    emit_report(run_overhead(a.duration, a.stub_ms, kinds, res, layouts, a.window, a.record, a.settle), a.out, a.json)
     return 0

@@ -114,6 +114,9 @@ def add_overhead(sub: argparse._SubParsersAction) -> None:
                                         "drone) vs a bare loop, a naive Ray pipeline and dora-rs, interleaved")
     p.add_argument("--duration", type=float, default=20.0, help="measured seconds per pipeline and configuration")
     p.add_argument("--window", type=float, default=5.0, help="seconds per round-robin window")
+    p.add_argument("--settle", type=float, default=4.0,
+                   help="seconds each AeroDaaS mission flies at its altitude before its window, not measured (the "
+                        "follow settling on its target after a climb at 4 m/s; default 4)")
     p.add_argument("--stub-ms", type=float, default=10.0, help="inference time of the fixed-cost stub detector, ms")
     p.add_argument("--detector", choices=["stub", "yolox", "both"], default="both")
     p.add_argument("--resolution", action="append", help="WxH (repeatable; default 1280x720 and 640x480)")

@@ -25,16 +25,18 @@ def _aerodaas(*args: str, timeout: float) -> subprocess.CompletedProcess:
 
 
 def test_bench_overhead_json_has_every_column_every_layout_and_the_honest_tail(tmp_path, ray_session):
-    """Every layout recorded and unrecorded (8 missions) beside the peers, one window of 1 s each: each mission's
-    commands count from its whole flight (a window holds at least the last applied one), so the checks below do
-    not depend on how many frames a loaded machine gets through in the window."""
+    """Every layout recorded and unrecorded (8 missions) beside the peers, one window of 1 s each after 0.5 s at
+    the hover altitude: each mission's commands count from its whole flight (a window holds at least the last
+    applied one), so the checks below do not depend on how many frames a loaded machine gets through in the
+    window."""
     out = tmp_path / "o.json"
     p = run_cli("bench", "overhead", "--detector", "stub", "--stub-ms", "2", "--resolution", "320x240",
-                "--duration", "1", "--window", "1", "--layout", "all", "--lockstep", "--record", "--out", str(out),
-                cwd=ROOT, shared_ray=True)
+                "--duration", "1", "--window", "1", "--settle", "0.5", "--layout", "all", "--lockstep", "--record",
+                "--out", str(out), cwd=ROOT, shared_ray=True)
     assert p.returncode == 0, p.stderr[-2000:]
     rep = json.loads(out.read_text())
     assert rep["benchmark"] == "overhead" and rep["machine"]["cpu_count"] >= 1 and rep["machine"]["ray"]
+    assert rep["settle_s"] == 0.5
     assert rep["layouts"] == ["colocated", "actors", "actors-ray", "actors+lockstep"] and rep["recorded"] is True
     assert rep["load"]["load_avg_1min_at_windows"]["n"] >= 3              # one load sample per window
     colo, actors, actors_ray, lockstep = rep["results"]

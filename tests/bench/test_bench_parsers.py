@@ -39,6 +39,7 @@ def test_the_command_line_imports_no_benchmark_and_no_heavy_library():
 @pytest.mark.parametrize("argv, message", [
     (["fleet", "--duration", "0"], "--duration must be > 0"),
     (["overhead", "--stub-ms", "-1"], "--stub-ms must be >= 0"),
+    (["overhead", "--settle", "-1"], "--settle must be >= 0 seconds, got -1.0"),
     (["raypath", "--repeat", "0"], "--repeat must be >= 1"),
     (["recorder", "--fps", "0"], "--fps must be positive"),
     (["startup", "--app", "/nonexistent/app.py"], "application '/nonexistent/app.py' not found"),
