@@ -188,12 +188,14 @@ class Harness:
 
     def run(self, trace: list[AnalyticsTask], *, max_events: int = 2_000_000,
             until_ms: float | None = None) -> Result:
-        """Run the trace to the end; every task ends in exactly one terminal state. Raises RuntimeError after
-        ``max_events`` events (a policy polling in a loop).
+        """Run the trace to the end (``until_ms`` None): every task ends in exactly one terminal state. Raises
+        RuntimeError after ``max_events`` events (a policy polling in a loop).
 
         ``until_ms``: stop before the first event at or after this simulated time (ms). The result's log and edge
-        starts are then exactly the full run's before ``until_ms`` (no event schedules another before its own time),
-        and nothing after: no end-of-run terminations, tasks left as they stand."""
+        starts are then exactly the full run's before ``until_ms`` (no event schedules another before its own time:
+        edge holds, cloud round trips and network delays are >= 0, a poll is never in the past; a negative
+        ``cloud_extra_ms`` would break this) and nothing after: no end-of-run terminations, the tasks left as they
+        stand, and ``utility``, ``states``, ``tiers`` and ``counters`` left empty."""
         self.res = Result(trace, 0.0, Counter(), Counter())
         for t in trace:
             self._push(t.arrival_ms, "arrive", t)

@@ -91,7 +91,8 @@ def _copy(tasks):
 def _run(policy, w, trace, cut, seed, alt_seed, until_ms: float | None = None, options: dict | None = None) -> Result:
     """One run. ``policy``: a registered name or ``"module:Class"`` (isolated: a fresh process, built with
     ``options``) or a class (in the harness's process, handed the trace and the harness if it has ``peek``).
-    ``until_ms``: the run stops there (:meth:`Harness.run`; a post-cut run is compared only before its cut)."""
+    ``until_ms``: the run stops there (:meth:`Harness.run`; a post-cut run is compared only before its cut, so
+    what a policy does on the other future after the cut is not run: the reference run covers the whole trace)."""
     pol = IsolatedPolicy(policy, w, options) if isinstance(policy, str) else policy(w)
     # admit_probes False: the cloud re-check asked once, at the send time (what decides the send), not bisected
     # into an admit-by time: a pipe round trip per call to an isolated policy
@@ -183,9 +184,10 @@ def check(policy, w, *, secret: bool = True, warm_up: bool = True, every: int = 
     own secrets, or, publicly, the reference run's own seeds: what a cross-run cache needs to pass). ``every``: use
     every n-th cut only. ``n_arrivals``: how many arrivals get a cut just before them (see :func:`cuts`).
     ``kind``, ``drones``, ``duration_s``: the traces (see :func:`cut_trace`; the post-cut future is another trace of
-    the same kind). ``options``: the isolated policy's (its constructor's keywords). A bursty kind's cuts begin 1 s after its first frame (the first seconds can be silent: nothing
-    decided before a cut there), its trace is re-drawn (another secret) until it has a burst and a silence after
-    that, and it gets cuts inside both (:func:`shape_cuts`)."""
+    the same kind). ``options``: the isolated policy's (its constructor's keywords). A bursty kind's cuts begin
+    1 s after its first frame (the first seconds can be silent: nothing decided before a cut there), its trace is
+    re-drawn (another secret) until it has a burst and a silence after that, and it gets cuts inside both
+    (:func:`shape_cuts`)."""
     trace_seed, seed = _trace_seed(secret, PUBLIC[0]), (secret_seed() if secret else PUBLIC[1])
     a = cut_trace(w, trace_seed, kind, drones=drones, duration_s=duration_s)
     shape = {}
