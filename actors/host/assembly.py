@@ -197,6 +197,9 @@ class ActorAssembly:
         self.scheduling = self._make_scheduling(plane, spec)
         self._add_analytics(plane, spec)
         self.drones: list[DroneComponent] = []
+        #: the last :meth:`run`'s span (its simulated seconds, the process's CPU seconds over it, its drones); None
+        #: before a run
+        self.flight_cpu: dict | None = None
         world = None
         for r in spec.robots:
             world = self._add_robot(plane, spec, r, world)
@@ -359,6 +362,7 @@ class ActorAssembly:
                 continue
             d.start()
         wall0 = time.monotonic()
+        cpu0, user0 = time.process_time(), self._user_cpu()
         step = 0
         active = [d for d in drones if not d.done]
         checkpoints = _Checkpointer(self.plane, drones, self.checkpoint_numbers)
@@ -399,6 +403,7 @@ class ActorAssembly:
                         d.finish()
                     active = []
         finally:
+            self.flight_cpu = self._flight_account(step * dt, len(drones), cpu0, user0)
             held.end()
             for d in drones:
                 _halt_cameras(d)
@@ -465,11 +470,42 @@ class ActorAssembly:
                         "frame_copies": self.plane.copies.snapshot(),
                         "lost_consumers": self.plane.lost_consumers(),
                         "tick_lateness_ms": _percentiles([x * 1e3 for x in getattr(self, "tick_lateness", [])]),
+                        "cpu": self.cpu_accounts(),
                         # an actor without the recorder (cloud): messages it could not hand to the edge recorder
                         "record_send_errors": list(getattr(self.recorder, "send_errors", []))[-5:]}
         if self.scheduling is not None:
             out["_analytics_scheduler"] = self.scheduling.report()
         return out
+
+    def _user_cpu(self) -> tuple[float, float, float]:
+        """CPU seconds so far of what the user brings, each on the threads that ran it (``time.thread_time``): this
+        actor's cameras' frame making, its analytics' ``process`` calls, the JPEG encodes of its recorded frames
+        (sent to the run's recorder actor)."""
+        rec = self.recorder
+        return (sum(c.render_cpu_s for c in self.comps.values() if isinstance(c, CameraComponent)),
+                sum(a.process_cpu_s for a in self.analytics),
+                rec.encode_cpu_s if isinstance(rec, RemoteRecorder) else 0.0)
+
+    def _flight_account(self, sim_s: float, drones: int, cpu0: float, user0: tuple) -> dict:
+        """A run's CPU account (:meth:`cpu_accounts`) from its start's ``time.process_time()`` (``cpu0``) and
+        :meth:`_user_cpu` (``user0``), taken at its end."""
+        cpu, user1 = time.process_time() - cpu0, self._user_cpu()
+        return {"flight_sim_s": round(sim_s, 6), "drones": drones, "flight_cpu_s": round(cpu, 6),
+                **{k: round(u1 - u0, 6) for k, u0, u1 in
+                   zip(("render_cpu_s", "analytics_cpu_s", "encode_cpu_s"), user0, user1)}}
+
+    def cpu_accounts(self) -> dict:
+        """Where this actor's CPU went, exactly (no sampling), in CPU seconds. After a :meth:`run`, over that run:
+        ``flight_sim_s`` (simulated s), ``drones``, ``flight_cpu_s`` (every thread of the process,
+        ``time.process_time``) and, of it, what the user brings: its cameras' frame making (``render_cpu_s``), its
+        analytics' ``process`` calls (``analytics_cpu_s``), the JPEG encodes of recorded frames (``encode_cpu_s``);
+        the framework's own part is ``flight_cpu_s`` minus those three. An actor that flew no run: the three over
+        its life so far."""
+        if self.flight_cpu is not None:
+            return dict(self.flight_cpu)
+        render, analytics, encode = self._user_cpu()
+        return {"render_cpu_s": round(render, 6), "analytics_cpu_s": round(analytics, 6),
+                "encode_cpu_s": round(encode, 6)}
 
     def close(self) -> dict:
         if self.scheduling is not None:

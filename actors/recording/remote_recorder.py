@@ -145,6 +145,9 @@ class RemoteRecorder(AnalyticsAccounting):
         self.sent = 0
         self.send_errors: list[str] = []
         self.frames_dropped = 0
+        #: CPU seconds of the JPEG encodes of recorded frames in this process (``time.thread_time`` of the sending
+        #: thread around them)
+        self.encode_cpu_s = 0.0
         self.closed = False
         #: the same interface as :class:`RecorderService`: a disk failure is the edge recorder's (the file is there),
         #: so these callbacks are never called here
@@ -266,8 +269,10 @@ class RemoteRecorder(AnalyticsAccounting):
         batch = [(it.numbered(base.produced.get(it.stream() or "", 0) + it.seq) if getattr(it, "seq", -1) >= 0
                   else it).of_incarnation(base.incarnation) for it in batch]
         if frames:  # the one JPEG encode of each recorded frame, off the camera's thread
+            c0 = time.thread_time()
             batch = [dataclasses.replace(it, frame=encode_frame(it.frame, self.jpeg_quality))
                      if isinstance(it, RecordImage) and isinstance(it.frame, np.ndarray) else it for it in batch]
+            self.encode_cpu_s += time.thread_time() - c0
             copies = getattr(self.plane, "copies", None)
             if copies is not None:
                 copies.count("recorder_jpeg_encoded", frames)

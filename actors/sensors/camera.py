@@ -83,6 +83,9 @@ class CameraComponent:
         #: the last frames' render time and capture dispatch delay (clock tick -> render start on the pool), ms
         self.render_ms: deque[float] = deque(maxlen=4096)
         self.dispatch_ms: deque[float] = deque(maxlen=4096)
+        #: CPU seconds of this camera's frame making (its source's ``frame_at``: a simulated camera's render), on
+        #: the thread that made each frame (``time.thread_time``): the part of a drone actor's CPU that is the camera's
+        self.render_cpu_s = 0.0
         self.latest: tuple | None = None
         self._busy = threading.Lock()
         #: the robot's event sink (DroneComponent.record_event), set by the actor's assembly: video_lost/restored
@@ -341,7 +344,9 @@ class CameraComponent:
             # made straight in a same-node channel's slot when the source can and the frame travels by one
             out = (self.plane.frame_buffer(self.cid, (self.k.height, self.k.width, 3), self.robot_id)
                    if type(self.src).renders_into and not isinstance(self.src, LiveFrameSource) else None)
+            c0 = time.thread_time()
             got = self.src.frame_at(t, pose) if out is None else self.src.frame_at(t, pose, out=out)
+            self.render_cpu_s += time.thread_time() - c0  # one capture at a time (``_busy``): no lost update
             out = None
             if got is None:  # no new frame since the last capture
                 self.dropped_at_camera += 1
@@ -453,7 +458,7 @@ class CameraComponent:
         return {"frames": self.frames, "ticks": self.ticks, "dropped_at_camera": self.dropped_at_camera,
                 "shed_late": self.shed_late, "frames_not_made": self.frames_not_made,
                 "record_fps": self.record_fps, "record_skipped": self.record_skipped,
-                "render_ms_median": float(np.median(r)),
+                "render_ms_median": float(np.median(r)), "render_cpu_s": round(self.render_cpu_s, 6),
                 "dispatch_ms_median": float(np.median(q)), "dispatch_ms_p99": float(np.percentile(q, 99)),
                 "recorder_dropped": getattr(self.recorder, "frames_dropped", 0) if self.recorder else 0,
                 "outlets": self.plane.outlet_stats(self.cid), "subscribers": len(self.plane.routes.get(self.cid, [])),

@@ -223,8 +223,35 @@ def _row(n: int, drones_per_actor: int, edge_nodes: int | None, res: Any, wall: 
             "tick_lateness_ms": {"median": float(np.median([x["median"] for x in lateness])) if lateness else None,
                                  "p99": max((x["p99"] for x in lateness), default=None)},
             "host_errors": sum(h.get("error_count", 0) for h in hosts.values()),
+            **drone_actor_cpu(hosts),
             "outcome": res.outcome,
             "outcomes": sorted({str(r.get("outcome")) for r in res.robots.values()})}
+
+
+#: what the user brings to a drone actor, outside the framework's share (:func:`drone_actor_cpu`)
+USER_CPU_PARTS = ("render_cpu_s", "analytics_cpu_s", "encode_cpu_s")
+
+
+def drone_actor_cpu(hosts: dict) -> dict:
+    """The drone actors' CPU over their runs, exactly, from each actor's own accounts
+    (:meth:`~aerodaas.actors.host.assembly.ActorAssembly.cpu_accounts`, in ``hosts``: host id -> its ``_host``
+    stats), in CPU-seconds per drone per simulated second: every thread of the drone actors (``all``), of it the
+    cameras' frame making, the analytics' ``process`` calls and the JPEG encodes of recorded frames, and what is
+    left, the framework's share (``framework_cpu_s_per_drone_per_sim_s``, also given alone). Empty when no drone
+    actor reported a run (all lost)."""
+    flown = [h["cpu"] for h in hosts.values() if (h.get("cpu") or {}).get("flight_sim_s")]
+    drone_s = sum(c["drones"] * c["flight_sim_s"] for c in flown)
+    if not drone_s:
+        return {}
+    total = sum(c["flight_cpu_s"] for c in flown)
+    user = {k: sum(c.get(k, 0.0) for c in flown) for k in USER_CPU_PARTS}
+    framework = total - sum(user.values())
+    return {"framework_cpu_s_per_drone_per_sim_s": round(framework / drone_s, 4),
+            "drone_actor_cpu_s_per_drone_per_sim_s": {
+                "all": round(total / drone_s, 4), "camera frame making": round(user["render_cpu_s"] / drone_s, 4),
+                "analytics process calls": round(user["analytics_cpu_s"] / drone_s, 4),
+                "recorded frames' JPEG encode": round(user["encode_cpu_s"] / drone_s, 4),
+                "framework": round(framework / drone_s, 4)}}
 
 
 #: attempts at a fleet size whose local Ray did not start (each after :func:`~aerodaas.runtime.ray_start.ensure_ray`'s
@@ -269,6 +296,8 @@ def run_fleet(sizes: tuple[int, ...] = DEFAULT_SIZES, duration_s: float = 30.0, 
                 + (f"frames dropped {row['dropped_frames_pct']:.1f}%" if camera else "no cameras")
                 + f"  CPU {row['cpu_pct']:.0f}%  RSS {row['rss_mb']:.0f} MB "
                 f"(PSS {row['pss_mb']:.0f} MB, {row['worker_processes']} workers, {row['processes']} processes)"
+                + (f"  framework {row['framework_cpu_s_per_drone_per_sim_s']:.4f} CPU-s per drone per sim s"
+                   if "framework_cpu_s_per_drone_per_sim_s" in row else "")
                 + (f"  per node {row['drones_per_node']}, GCS actors {row.get('gcs_actors')}" if edge_nodes else "")
                 + (f"  RECORDING LOST {row['recording_lost']} messages" if row.get("recording_lost") else "")
                 + (f"  node window incomplete: {row['window']}" if row.get("window", {}).get("complete") is False

@@ -1,5 +1,7 @@
 """Where a drone's time and memory go: ``aerodaas bench fleet --profile`` measures one drone actor
-of the running fleet, and every process of the node, over a window of the flight.
+of the running fleet, and every process of the node, over a window of the flight. The framework's share itself is
+not taken from this sample: every drone actor accounts its CPU exactly (:func:`aerodaas.bench.fleet.drone_actor_cpu`);
+this breakdown says where in the framework it goes.
 
 CPU: the exact CPU time of every thread of the drone actor over the window, from ``/proc/<pid>/task/<tid>/stat``
 (fields 14 and 15, utime and stime, in clock ticks: proc(5)), apportioned to components by a py-spy sample of the
@@ -35,8 +37,7 @@ from dataclasses import dataclass, field
 from aerodaas.bench.procs import ray_processes
 from aerodaas.sim.ground_cache import cache_dir
 
-__all__ = ["Component", "ThreadCpu", "classify_stack", "thread_cpu", "smaps_pss", "attribute", "framework_share",
-           "ActorProfiler"]
+__all__ = ["Component", "ThreadCpu", "classify_stack", "thread_cpu", "smaps_pss", "attribute", "ActorProfiler"]
 
 
 class Component(enum.Enum):
@@ -57,10 +58,6 @@ class Component(enum.Enum):
     RAY_CORE = "Ray, C++ threads (core worker I/O, gRPC, heartbeats, object store client)"
     NATIVE_UNNAMED = "unnamed native threads (OpenCV's worker pool: its share of each warp)"
 
-
-#: what the drone's user brings, outside the framework's share (:func:`framework_share`): the rendering of its
-#: simulated camera (and OpenCV's pool threads' part of it), the JPEG encode of its recorded frames, its analytics
-USER_PARTS = frozenset({"CAMERA", "NATIVE_UNNAMED", "RECORD_ENCODE", "ANALYTICS"})
 
 #: first match wins: the innermost concern before the caller that contains it (an analytics runs inside the
 #: camera's publish, the JPEG encode inside the recorder's send)
@@ -177,12 +174,6 @@ def attribute(before: dict[int, ThreadCpu], after: dict[int, ThreadCpu],
             comp = Component.NATIVE_UNNAMED if th.comm == process_comm else Component.RAY_CORE
             cpu[comp] = cpu.get(comp, 0.0) + delta
     return cpu
-
-
-def framework_share(cpu: dict[Component, float]) -> float:
-    """The framework's part of a drone actor's CPU (same unit as ``cpu``): every component but
-    :data:`USER_PARTS`."""
-    return sum(v for c, v in cpu.items() if c.name not in USER_PARTS)
 
 
 def _mapping_kind(path: str, ground_dir: str) -> str:
@@ -306,7 +297,6 @@ class ActorProfiler:
                 "actor_cpu_s_per_drone_per_sim_s": {c.value: round(v / per, 4) for c, v in
                                                     sorted(actor.items(), key=lambda kv: -kv[1])},
                 "actor_cpu_s_per_drone_per_sim_s_total": round(sum(actor.values()) / per, 4),
-                "framework_cpu_s_per_drone_per_sim_s": round(framework_share(actor) / per, 4),
                 "threads_cpu_s_per_drone_per_sim_s": _busiest_threads(pid, before, after, per),
                 "node_cpu_s_per_drone_per_sim_s": {r: round(v / sim_s, 4) for r, v in
                                                    sorted(node.items(), key=lambda kv: -kv[1])},

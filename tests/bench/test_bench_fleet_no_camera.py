@@ -29,5 +29,9 @@ def test_packed_drones_without_cameras_fly_and_make_no_frame(tmp_path):
     # every drone flew its control loop; no camera ticked, no frame reached an analytics
     assert row["ticks"] >= 4 * 10 and row["host_errors"] == 0 and row["outcomes"] == ["timeout"]
     assert row["camera_ticks"] == 0 and row["frames_analysed"] == 0
+    # the drone actors' own CPU accounts: no camera made a frame, no analytics ran; all of it is the framework's
+    cpu = row["drone_actor_cpu_s_per_drone_per_sim_s"]
+    assert cpu["camera frame making"] == cpu["analytics process calls"] == cpu["recorded frames' JPEG encode"] == 0
+    assert cpu["framework"] == cpu["all"] == row["framework_cpu_s_per_drone_per_sim_s"] > 0, cpu
     assert "no cameras" in p.stderr
     assert sorted(x.name for x in tmp_path.iterdir()) == ["fleet.json"]  # nothing it was not asked for

@@ -142,6 +142,23 @@ def test_a_recorded_camera_without_record_fps_renders_and_records_every_frame(re
     assert cam["frames_not_made"] == cam["record_skipped"] == 0, cam
 
 
+def test_the_drone_actor_accounts_its_cpu_and_what_the_user_brings_to_it(recorded_run):
+    """The drone actor's CPU over its run (``_host.cpu``): its span in vehicle time, every thread's CPU, and of it
+    the frame making of its three rendering cameras, its analytics' ``process`` calls and the JPEG encodes of the
+    frames it recorded, each counted on the thread that ran it and only during the run (lock-step: every capture
+    ends within it), so the cameras' and the analytics' own counters add up to the actor's."""
+    res, _, span_s = recorded_run
+    (cpu,) = [h["cpu"] for h in res.stats["_hosts"].values() if "flight_sim_s" in h.get("cpu", {})]
+    assert cpu["drones"] == 1 and span_s - 0.5 <= cpu["flight_sim_s"] <= span_s + 2.0, (cpu, span_s)
+    user = cpu["render_cpu_s"] + cpu["analytics_cpu_s"] + cpu["encode_cpu_s"]
+    assert min(cpu["render_cpu_s"], cpu["analytics_cpu_s"], cpu["encode_cpu_s"]) > 0.0, cpu
+    assert user < cpu["flight_cpu_s"], cpu  # the framework's own part is what is left, never negative
+    cams = res.stats["d00"]["cameras"]
+    assert set(cams) == {"seen", "rec", "all"}, cams
+    assert abs(sum(c["render_cpu_s"] for c in cams.values()) - cpu["render_cpu_s"]) < 1e-5, (cams, cpu)
+    assert abs(res.stats["d00"]["analytics"][0]["process_cpu_s"] - cpu["analytics_cpu_s"]) < 1e-5, cpu
+
+
 @pytest.mark.parametrize("rate, said", [(12, "must be at most properties.fps (10), got 12"),
                                         (-1, "must be a finite number within [0, 240], got -1"),
                                         ("2", "got '2'")])
