@@ -41,7 +41,8 @@ class _Cfg(BaseModel):
     :func:`_format_errors`), numbers must be finite (no NaN/Infinity), and types are strict: ``"yes"`` or ``1``
     is not a boolean, ``"3"`` is not a number (JSON has real booleans and numbers)."""
 
-    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+    # validators built at first use (as aerodaas.model.types._Model): an actor builds only those it validates with
+    model_config = ConfigDict(defer_build=True, extra="forbid", strict=True, allow_inf_nan=False)
 
 
 def did_you_mean(word: str, choices) -> str:
