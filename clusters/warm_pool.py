@@ -34,6 +34,7 @@ import gc
 import hashlib
 import importlib
 import os
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -101,10 +102,8 @@ def build_deferred_models() -> int:
     (``defer_build``: :class:`aerodaas.model.types._Model`), in every ``aerodaas`` module imported, so that a warm
     worker's first frames and set-up do not wait for them. Returns how many were built; never raises (a model that
     does not build is left to its first use, which reports the error)."""
-    import sys
-
     try:
-        from pydantic import BaseModel
+        from pydantic import BaseModel  # lazy: only in a worker's hook; the daemon importing this module needs none
     except BaseException:  # noqa: BLE001 - a warm-up must never stop a worker from starting
         return 0
     built = 0
