@@ -34,7 +34,6 @@ import gc
 import hashlib
 import importlib
 import os
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -42,9 +41,8 @@ from dataclasses import dataclass, field
 
 import psutil
 
-__all__ = ["HOOK_MODULE", "PREIMPORT_MODULES", "READY_DIR", "WarmPool", "build_deferred_models", "code_fingerprint",
-           "forget_ended", "hook_done", "package_roots", "preimport", "raylet_pool", "run_in_thread",
-           "setup_hook_env"]
+__all__ = ["HOOK_MODULE", "PREIMPORT_MODULES", "READY_DIR", "WarmPool", "code_fingerprint", "forget_ended",
+           "hook_done", "package_roots", "preimport", "raylet_pool", "run_in_thread", "setup_hook_env"]
 
 #: the process title Ray gives an idle Python worker (exactly: not ``ray::IDLE_SPILL_WORKER`` / ``_RESTORE_WORKER``)
 IDLE_TITLE = "ray::IDLE"
@@ -92,32 +90,8 @@ def preimport() -> None:
             importlib.import_module(name)
         except BaseException:  # noqa: BLE001 - a warm-up must never stop a worker from starting
             pass
-    build_deferred_models()
     gc.collect()
     gc.freeze()
-
-
-def build_deferred_models() -> int:
-    """Build now the validators of the framework's Pydantic models whose build waits for their first use
-    (``defer_build``: :class:`aerodaas.model.types._Model`), in every ``aerodaas`` module imported, so that a warm
-    worker's first frames and set-up do not wait for them. Returns how many were built; never raises (a model that
-    does not build is left to its first use, which reports the error)."""
-    try:
-        from pydantic import BaseModel  # lazy: only in a worker's hook; the daemon importing this module needs none
-    except BaseException:  # noqa: BLE001 - a warm-up must never stop a worker from starting
-        return 0
-    built = 0
-    for name, mod in list(sys.modules.items()):
-        if not name.startswith("aerodaas.") or mod is None:
-            continue
-        for obj in list(vars(mod).values()):
-            if (isinstance(obj, type) and issubclass(obj, BaseModel) and obj.__module__ == name
-                    and not obj.__pydantic_complete__):
-                try:
-                    built += bool(obj.model_rebuild())
-                except BaseException:  # noqa: BLE001 - left to its first use
-                    pass
-    return built
 
 
 #: the folder beside the hook module where each worker leaves an empty file named by its pid once its hook has run

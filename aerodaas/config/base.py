@@ -41,8 +41,7 @@ class _Cfg(BaseModel):
     :func:`_format_errors`), numbers must be finite (no NaN/Infinity), and types are strict: ``"yes"`` or ``1``
     is not a boolean, ``"3"`` is not a number (JSON has real booleans and numbers)."""
 
-    # validators built at first use (as aerodaas.model.types._Model): an actor builds only those it validates with
-    model_config = ConfigDict(defer_build=True, extra="forbid", strict=True, allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
 
 def did_you_mean(word: str, choices) -> str:

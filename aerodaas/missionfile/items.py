@@ -15,7 +15,7 @@ from aerodaas.missionfile.commands import (COMPLEX_ITEM_COMMAND, MISSION_FRAMES,
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(defer_build=True, extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
 
 def float32(v: float) -> float:

@@ -56,7 +56,7 @@ _COVER_TOL_M = 1e-6
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(defer_build=True, extra="forbid", validate_assignment=True, strict=True, allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, strict=True, allow_inf_nan=False)
 
 
 def _check_lat_lon(lat: float, lon: float, where: str) -> None:

@@ -47,7 +47,7 @@ class GimbalLimits(BaseModel):
     relative to the vehicle's nose, positive right). Raises pydantic's ValidationError naming the field for a
     value out of range, a string or a bool, or a minimum not below its maximum."""
 
-    model_config = ConfigDict(defer_build=True, strict=True, frozen=True, extra="forbid")
+    model_config = ConfigDict(strict=True, frozen=True, extra="forbid")
 
     pitch_min_deg: float = Field(-90.0, ge=-180.0, le=180.0)
     pitch_max_deg: float = Field(20.0, ge=-180.0, le=180.0)

@@ -71,7 +71,7 @@ class Providers(BaseModel):
     (``providers.names: 'cuda' (item 0) is not an onnxruntime execution provider (did you mean
     'CUDAExecutionProvider'?) ...``)."""
 
-    model_config = ConfigDict(defer_build=True, frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
     names: tuple[str, ...]
     required: StrictBool = False

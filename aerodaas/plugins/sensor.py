@@ -76,7 +76,7 @@ class Delivery(Enum):
 class SensorPropertiesBase(BaseModel):
     """Base of every sensor type's ``properties`` model: unknown properties are refused, numbers are finite."""
 
-    model_config = ConfigDict(defer_build=True, extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class SensorPluginConfig(SensorPropertiesBase):

@@ -26,7 +26,7 @@ __all__ = ["JSON_SCHEMA_MODELS", "json_schema_for", "plugin_json_schemas"]
 class _Open(BaseModel):
     """Known fields typed; further keys allowed (events carry event-specific keys)."""
 
-    model_config = ConfigDict(defer_build=True, extra="allow")
+    model_config = ConfigDict(extra="allow")
 
 
 class MissionState(BaseModel):
