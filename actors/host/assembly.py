@@ -500,7 +500,9 @@ class ActorAssembly:
         ``time.process_time``) and, of it, what the user brings: its cameras' frame making (``render_cpu_s``), its
         analytics' ``process`` calls (``analytics_cpu_s``), the JPEG encodes of recorded frames (``encode_cpu_s``);
         the framework's own part is ``flight_cpu_s`` minus those three. An actor that flew no run: the three over
-        its life so far."""
+        its life so far. Counted as the framework's, though the user brought them: plug-in sensors' sampling, a video
+        stream's decoding, OpenCV's own pool threads (``actor_opencv_threads`` above 1), the encodes of a recorder
+        inside this actor (``RecorderService``), analytics run by an analytics scheduler's dispatcher."""
         if self.flight_cpu is not None:
             return dict(self.flight_cpu)
         render, analytics, encode = self._user_cpu()
