@@ -325,7 +325,7 @@ class EnvironmentConfig(_Cfg):
     mavlink: MavlinkDefaults = Field(default_factory=MavlinkDefaults, description="defaults for every robot on a "
                                      "MAVLink backend (a robot's own mavlink section overrides them)")
     drones_per_actor: int = Field(default=1, ge=1, le=256, description="drones sharing one drone actor (one process); "
-                                  "1: an actor per drone; more for memory-bound fleets")
+                                  "1: an actor per drone; more for large fleets (less memory and CPU per drone)")
     actor_max_restarts: int = Field(default=1, ge=0, le=100, description="Ray max_restarts of every drone, analytics, "
                                     "dispatcher and per-node recorder actor (the run's recorder: 3, new segments)")
     actor_opencv_threads: int | None = Field(
