@@ -95,6 +95,10 @@ def _halt_cameras(d: Any) -> None:
         cam["comp"].halt()
 
 
+#: the keys of :meth:`ActorAssembly.cpu_accounts` for what the user brings, in :meth:`ActorAssembly._user_cpu`'s
+#: order: the cameras' frame making, the analytics' ``process`` calls, the recorded frames' JPEG encodes (CPU s)
+USER_CPU_PARTS = ("render_cpu_s", "analytics_cpu_s", "encode_cpu_s")
+
 class _ClockHold:
     """The wall time this actor's clock spent waiting for its recorder (``recorder.hold.held_s``,
     :class:`~aerodaas.actors.recording.remote_recorder.FrameHold`): :meth:`taken` returns what was waited since the last call; a wait that
@@ -491,8 +495,7 @@ class ActorAssembly:
         :meth:`_user_cpu` (``user0``), taken at its end."""
         cpu, user1 = time.process_time() - cpu0, self._user_cpu()
         return {"flight_sim_s": round(sim_s, 6), "drones": drones, "flight_cpu_s": round(cpu, 6),
-                **{k: round(u1 - u0, 6) for k, u0, u1 in
-                   zip(("render_cpu_s", "analytics_cpu_s", "encode_cpu_s"), user0, user1)}}
+                **{k: round(u1 - u0, 6) for k, u0, u1 in zip(USER_CPU_PARTS, user0, user1)}}
 
     def cpu_accounts(self) -> dict:
         """Where this actor's CPU went, exactly (no sampling), in CPU seconds. After a :meth:`run`, over that run:
@@ -505,9 +508,7 @@ class ActorAssembly:
         inside this actor (``RecorderService``), analytics run by an analytics scheduler's dispatcher."""
         if self.flight_cpu is not None:
             return dict(self.flight_cpu)
-        render, analytics, encode = self._user_cpu()
-        return {"render_cpu_s": round(render, 6), "analytics_cpu_s": round(analytics, 6),
-                "encode_cpu_s": round(encode, 6)}
+        return {k: round(u, 6) for k, u in zip(USER_CPU_PARTS, self._user_cpu())}
 
     def close(self) -> dict:
         if self.scheduling is not None:

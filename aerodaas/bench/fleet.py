@@ -228,10 +228,6 @@ def _row(n: int, drones_per_actor: int, edge_nodes: int | None, res: Any, wall: 
             "outcomes": sorted({str(r.get("outcome")) for r in res.robots.values()})}
 
 
-#: what the user brings to a drone actor, outside the framework's share (:func:`drone_actor_cpu`)
-USER_CPU_PARTS = ("render_cpu_s", "analytics_cpu_s", "encode_cpu_s")
-
-
 def drone_actor_cpu(hosts: dict) -> dict:
     """The drone actors' CPU over their runs, exactly, from each actor's own accounts
     (:meth:`~aerodaas.actors.host.assembly.ActorAssembly.cpu_accounts`, in ``hosts``: host id -> its ``_host``
@@ -239,6 +235,8 @@ def drone_actor_cpu(hosts: dict) -> dict:
     cameras' frame making, the analytics' ``process`` calls and the JPEG encodes of recorded frames, and what is
     left, the framework's share (``framework_cpu_s_per_drone_per_sim_s``, also given alone). Empty when no drone
     actor reported a run (all lost)."""
+    from aerodaas.actors.host.assembly import USER_CPU_PARTS  # lazy: heavy OpenCV; the run's actors import it anyway
+
     flown = [h["cpu"] for h in hosts.values() if (h.get("cpu") or {}).get("flight_sim_s")]
     drone_s = sum(c["drones"] * c["flight_sim_s"] for c in flown)
     if not drone_s:
