@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pytest
@@ -132,6 +133,21 @@ def pytest_configure(config):
     them by their number of tests, which puts the files of a few long end-to-end runs last."""
     if hasattr(config.option, "loadscopereorder"):
         config.option.loadscopereorder = False
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_collection(session):
+    """Collect with ``sys.dont_write_bytecode`` off in this pytest process, so that pytest keeps the test modules
+    whose asserts it rewrote (``__pycache__/*-pytest-*.pyc``, read back by every later collection) even where
+    ``PYTHONDONTWRITEBYTECODE`` is set, as on CI machines: each pytest process (each xdist worker) otherwise rewrites
+    all of them again, 7.7 instead of 3.4 CPU-s per collection of this suite (docs/results/test-tiers.md). The
+    flag is restored after the collection; subprocesses keep the environment's."""
+    saved = sys.dont_write_bytecode
+    sys.dont_write_bytecode = False
+    try:
+        return (yield)
+    finally:
+        sys.dont_write_bytecode = saved
 
 
 #: the slow groups whose outcome needs the CPU when the vehicle's or the stream's clock says so (real firmware, a
