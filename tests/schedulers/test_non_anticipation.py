@@ -218,7 +218,10 @@ def check(policy, w, *, secret: bool = True, warm_up: bool = True, every: int = 
         before_a = _before(ra, cut)
         # not a vacuous comparison: a decision logged or an edge start before the cut (an edge-only policy logs a
         # task when it ends, and with a secret trace seed the first end can come after an early cut)
-        assert before_a[0] or before_a[1], f"nothing decided before the cut {cut}"
+        assert before_a[0] or before_a[1], (
+            f"nothing decided before the cut {cut}: first arrivals {[round(t.arrival_ms, 1) for t in a[:4]]}, "
+            f"{len(ra.log)} decisions in all (first {ra.log[:2]}), edge starts {ra.edge_starts[:2]}, "
+            f"task states {dict(ra.states)}")
         if before_a != _before(rb, cut):
             flagged.append(cut)
     return Check(points, flagged, ra, a, {"trace": trace_seed, "draws": seed}, shape)
