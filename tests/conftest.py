@@ -140,8 +140,8 @@ def pytest_collection(session):
     """Collect with ``sys.dont_write_bytecode`` off in this pytest process, so that pytest keeps the test modules
     whose asserts it rewrote (``__pycache__/*-pytest-*.pyc``, read back by every later collection) even where
     ``PYTHONDONTWRITEBYTECODE`` is set, as on CI machines: each pytest process (each xdist worker) otherwise rewrites
-    all of them again, 7.7 instead of 3.4 CPU-s per collection of this suite (docs/results/test-tiers.md). The
-    flag is restored after the collection; subprocesses keep the environment's."""
+    all of them again, about half of its collection's CPU (docs/results/test-tiers.md). The flag is restored after
+    the collection; subprocesses keep the environment's."""
     saved = sys.dont_write_bytecode
     sys.dont_write_bytecode = False
     try:
