@@ -99,6 +99,7 @@ def _halt_cameras(d: Any) -> None:
 #: order: the cameras' frame making, the analytics' ``process`` calls, the recorded frames' JPEG encodes (CPU s)
 USER_CPU_PARTS = ("render_cpu_s", "analytics_cpu_s", "encode_cpu_s")
 
+
 class _ClockHold:
     """The wall time this actor's clock spent waiting for its recorder (``recorder.hold.held_s``,
     :class:`~aerodaas.actors.recording.remote_recorder.FrameHold`): :meth:`taken` returns what was waited since the last call; a wait that

@@ -223,8 +223,8 @@ def test_a_plugin_on_the_cluster_import_path_is_not_shipped(tmp_path):
 
 def test_a_warm_worker_holds_the_follow_assignment_and_hides_its_imports_from_the_collector():
     """In a fresh interpreter, as in a warm worker: after the hook, the follow's track assignment (scipy.optimize)
-    and the built-in analytics are imported and what the imports allocated is frozen, so that the actor's own set-up collection
-    (``DataPlane.watch_gc``) scans only what the actor makes."""
+    and the built-in analytics are imported and what the imports allocated is frozen, so that the actor's own set-up
+    collection (``DataPlane.watch_gc``) scans only what the actor makes."""
     import subprocess
     import sys
     from pathlib import Path
