@@ -197,17 +197,25 @@ WAITING_FILES = ("test_mavlink.py", "test_video_source.py", "test_tello.py", "te
                  "test_cloud_pool_losses.py", "test_channel.py")
 #: the name of that lane (an ``xdist_group``)
 WAITING_LANE = "waiting-lane"
+#: the development tier's architecture checks (``tests/architecture``) but its fresh-interpreter import budgets: they
+#: walk the syntax trees of the same few hundred files, parsed once per pytest process and kept while they run one
+#: after the other (``tests/architecture/conftest.py``), so under ``--dist loadgroup`` they share one lane: one
+#: worker parses the code base once instead of each file's worker once more
+ARCHITECTURE_LANE = "architecture-lane"
+ARCHITECTURE_OWN_UNITS = ("test_lazy_imports.py",)
 #: the lanes that come first in the collection, so that xdist hands each to a worker of its own at once
 FIRST_LANES = (REALTIME_LANE, WAITING_LANE)
 
 
 def lane(item) -> str:
-    """The ``xdist_group`` of any test: a slow test's :func:`slow_lane`; a development-tier test's file name, or
-    :data:`WAITING_LANE` for the files of :data:`WAITING_FILES`. Under ``--dist loadgroup`` (both tiers, as the README
+    """The ``xdist_group`` of any test: a slow test's :func:`slow_lane`; a development-tier test's file name,
+    :data:`WAITING_LANE` for the files of :data:`WAITING_FILES`, or :data:`ARCHITECTURE_LANE`. Under ``--dist loadgroup`` (both tiers, as the README
     runs them) a file stays on one worker with its module fixtures; under ``--dist loadfile`` the marks change
     nothing."""
     if item.get_closest_marker("slow"):
         return slow_lane(item)
+    if item.path.parent.name == "architecture" and item.path.name not in ARCHITECTURE_OWN_UNITS:
+        return ARCHITECTURE_LANE
     return WAITING_LANE if item.path.name in WAITING_FILES else item.path.name
 
 

@@ -19,6 +19,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from tests.architecture import sources
+
 ROOT = Path(__file__).resolve().parents[2]
 SCANNED = ("aerodaas/backends", "examples/plugins")
 #: the fields of VehicleState that once were a property each on every backend
@@ -31,8 +33,7 @@ def _classes() -> dict[str, tuple[str, ast.ClassDef]]:
     out: dict[str, tuple[str, ast.ClassDef]] = {}
     for folder in SCANNED:
         for path in sorted((ROOT / folder).rglob("*.py")):
-            tree = ast.parse(path.read_text(encoding="utf-8"))
-            for node in ast.walk(tree):
+            for node in ast.walk(sources.tree(path)):
                 if isinstance(node, ast.ClassDef):
                     out[node.name] = (str(path.relative_to(ROOT)), node)
     return out

@@ -15,6 +15,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from tests.architecture import sources
+
 ROOT = Path(__file__).resolve().parents[2]
 SCANNED = ("aerodaas", "actors", "schedulers", "clusters")
 #: calls that build a mutable container
@@ -108,10 +110,15 @@ def mutated_names(tree: ast.AST) -> set[str]:
 
 
 def scan(files: dict[str, str]) -> set[tuple[str, str]]:
-    """``(file, name)`` of every module-level mutable state among ``files`` (``{relative path: source}``): a
-    mutable binding (:func:`module_bindings`) mutated anywhere in ``files``, a stateful object however used, and a
+    """``(file, name)`` of every module-level mutable state among ``files`` (``{relative path: source}``), see
+    :func:`scan_trees`."""
+    return scan_trees({rel: ast.parse(src, rel) for rel, src in files.items()})
+
+
+def scan_trees(trees: dict[str, ast.Module]) -> set[tuple[str, str]]:
+    """``(file, name)`` of every module-level mutable state among ``trees`` (``{relative path: syntax tree}``): a
+    mutable binding (:func:`module_bindings`) mutated anywhere in them, a stateful object however used, and a
     module-level name rebound with ``global``."""
-    trees = {rel: ast.parse(src, rel) for rel, src in files.items()}
     mutated: set[str] = set().union(*(mutated_names(t) for t in trees.values()))
     found: set[tuple[str, str]] = set()
     for rel, tree in trees.items():
@@ -127,8 +134,10 @@ def scan(files: dict[str, str]) -> set[tuple[str, str]]:
     return found
 
 
-def _production_files() -> dict[str, str]:
-    return {str(p.relative_to(ROOT)): p.read_text(encoding="utf-8")
+def _production_trees() -> dict[str, ast.Module]:
+    """The scanned files' syntax trees (shared with the other architecture checks: :mod:`tests.architecture.sources`)
+    by path from the repository's root, the applications left out."""
+    return {str(p.relative_to(ROOT)): sources.tree(p)
             for d in SCANNED for p in sorted((ROOT / d).rglob("*.py"))
             if str(p.relative_to(ROOT)) not in APPLICATIONS}
 
@@ -147,7 +156,7 @@ def test_the_scan_finds_module_state_and_leaves_tables_and_constants_alone():
 
 
 def test_no_module_level_mutable_state_outside_the_registry_and_the_process_object():
-    found = scan(_production_files())
+    found = scan_trees(_production_trees())
     new = sorted(found - ALLOWED - KNOWN_DEBT)
     assert not new, ("module-level mutable state (move it into an owned object, see tests/architecture/test_module_state.py):\n"
                      + "\n".join(f"{f}: {n}" for f, n in new))
@@ -158,8 +167,7 @@ def test_no_module_level_mutable_state_outside_the_registry_and_the_process_obje
 def test_the_former_module_level_state_is_gone():
     """``MISSION_LISTENERS``, ``STOP_SIGNALS``, ``_RAISE_OK``, ``IN_MISSION`` (driver) and ``_STATE``/``_EARLY``
     (ray_start) were module-level lists and dicts; each is now a field of an owned object."""
-    files = _production_files()
-    bound = {(rel, name) for rel, src in files.items() for name in module_bindings(ast.parse(src))}
+    bound = {(rel, name) for rel, tree in _production_trees().items() for name in module_bindings(tree)}
     named = {"MISSION_LISTENERS", "STOP_SIGNALS", "_RAISE_OK", "IN_MISSION", "_STATE", "_EARLY", "_ENTRIES",
              "_LOADED", "_BY_VALUE", "_LINKS", "_LINKS_LOCK"}
     assert {n for _, n in bound} & named == set()

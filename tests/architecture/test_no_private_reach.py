@@ -16,6 +16,8 @@ import importlib.util
 import re
 from pathlib import Path
 
+from tests.architecture import sources
+
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("aerodaas", "actors", "schedulers", "clusters")
 
@@ -114,9 +116,9 @@ def _parsed() -> tuple[tuple[str, ast.Module], ...]:
     out = []
     for pkg in PACKAGES:
         for path in sorted((ROOT / pkg).rglob("*.py")):
-            text = path.read_text(encoding="utf-8")
+            text = sources.source(path)
             if len(_ANY_PRIVATE.findall(text)) > len(_OWN_PRIVATE.findall(text)):
-                out.append((path.relative_to(ROOT).as_posix(), ast.parse(text, str(path))))
+                out.append((path.relative_to(ROOT).as_posix(), sources.tree(path)))
     return tuple(out)
 
 

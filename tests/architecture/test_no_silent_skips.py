@@ -14,6 +14,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from tests.architecture import sources
+
 ROOT = Path(__file__).resolve().parents[2]
 TESTS = ROOT / "tests"
 
@@ -57,9 +59,8 @@ def _skip_name(node: ast.AST) -> str | None:
 def _skips(path: Path) -> list[tuple[int, str, str | None]]:
     """(line, source line, enclosing function name) of every use of a skip name in ``path``: a call, or a mark
     used without a call (``@pytest.mark.skip``)."""
-    source = path.read_text()
-    tree = ast.parse(source, filename=str(path))
-    lines = source.splitlines()
+    tree = sources.tree(path)
+    lines = sources.source(path).splitlines()
     found: list[tuple[int, str, str | None]] = []
 
     def visit(node: ast.AST, func: str | None) -> None:
