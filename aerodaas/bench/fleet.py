@@ -30,8 +30,10 @@ from typing import Any
 
 import numpy as np
 import psutil
+import ray
 
 from aerodaas.app.api import Environment
+from aerodaas.bench.bare_actor import BareActor
 from aerodaas.bench.fleet_analytics import FrameExposure
 from aerodaas.bench.fleet_nodes import ClusterLayout, FlightWindow, drones_in_actor, node_report, recorder_throughput
 from aerodaas.bench.fleet_profile import ActorProfiler
@@ -148,7 +150,8 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
     nodes, recorded with one recorder per node into a temporary directory (removed after; only the numbers are
     kept); returns the measured row (with ``nodes`` on a cluster). ``profile``: also the cost table of one drone
     actor and of the node's processes (:class:`~aerodaas.bench.fleet_profile.ActorProfiler`, local Ray only), as
-    ``"profile"`` in the row. ``camera`` False: the drones fly without cameras (no frame is made or analysed)."""
+    ``"profile"`` in the row, with an idle :class:`~aerodaas.bench.bare_actor.BareActor` measured beside the fleet
+    (left out of the row's processes, CPU and memory). ``camera`` False: the drones fly without cameras (no frame is made or analysed)."""
     ray_start.shutdown_ray()
     opts = RunOptions(progress=False)
     cluster = edge_nodes is not None
@@ -165,20 +168,24 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
                 robot.on_mission_start(window.begin)
         try:
             ray_start.ensure_ray(opts.address)
+            prof, floor, bare = None, None, ()
+            if profile and not cluster:  # the floor, measured beside the fleet and left out of its rows (the
+                floor = BareActor.remote()  # handle kept: Ray ends an actor whose handles are gone)
+                bare = (ray.get(floor.pid.remote(), timeout=120),)
             time.sleep(2.0)  # let Ray's own processes settle before measuring
-            procs = ray_processes(nodes)
+            procs = ray_processes(nodes, bare)
             cpu0, wall0 = cpu_seconds(procs), time.monotonic()
-            prof = None
             if profile and not cluster:
                 # the window: after the fleet's start (its actors up and flying), within the flight
-                prof = ActorProfiler(n, min(drones_per_actor, n), window_s=max(2.0, min(10.0, duration_s / 2))).start()
-            with MemorySampler(1.0, nodes) as mem:
+                prof = ActorProfiler(n, min(drones_per_actor, n), bare_pid=bare[0],
+                                     window_s=max(2.0, min(10.0, duration_s / 2))).start()
+            with MemorySampler(1.0, nodes, bare) as mem:
                 res = env.start_mission(timeout=duration_s, options=opts)
             for m in (prof, window):
                 if m is not None:
                     m.stop()
             wall = time.monotonic() - wall0
-            cpu = cpu_seconds(ray_processes(nodes)) - cpu0
+            cpu = cpu_seconds(ray_processes(nodes, bare)) - cpu0
             mission_s = float(res.stats.get("_timing", {}).get("mission_s", wall))
             if window is not None:
                 extra = _cluster_part(window, lc, env, res, rec_dir, mission_s)

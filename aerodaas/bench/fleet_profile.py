@@ -37,7 +37,8 @@ from dataclasses import dataclass, field
 from aerodaas.bench.procs import ray_processes
 from aerodaas.sim.ground_cache import cache_dir
 
-__all__ = ["Component", "ThreadCpu", "classify_stack", "thread_cpu", "smaps_pss", "attribute", "ActorProfiler"]
+__all__ = ["Component", "ThreadCpu", "classify_stack", "thread_cpu", "thread_wakes", "process_counts", "bare_row",
+           "smaps_pss", "attribute", "ActorProfiler"]
 
 
 class Component(enum.Enum):
@@ -122,6 +123,24 @@ def thread_cpu(pid: int) -> dict[int, ThreadCpu]:
         rest = raw[raw.rindex(")") + 2:].split()  # fields from 3 (state) on; utime, stime are fields 14, 15
         out[int(tid)] = ThreadCpu(int(tid), comm, (int(rest[11]) + int(rest[12])) / tick)
     return out
+
+
+def thread_wakes(pid: int) -> int:
+    """The voluntary context switches of every thread of ``pid`` so far, summed (``voluntary_ctxt_switches`` in each
+    ``/proc/<pid>/task/<tid>/status``: proc(5)): each is a thread blocking (a sleep, a lock, a queue, a socket), to
+    be woken again, so their rate is the process's wakes per second. A thread that exits between two reads loses
+    its count. Raises FileNotFoundError when the process is gone."""
+    total = 0
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        try:
+            with open(f"/proc/{pid}/task/{tid}/status") as f:
+                for line in f:
+                    if line.startswith("voluntary_ctxt_switches:"):
+                        total += int(line.split()[1])
+                        break
+        except OSError:
+            continue
+    return total
 
 
 _PYSPY_LINE = re.compile(r"^thread \((?:0x)?([0-9a-fA-F]+)\)(?::[^;]*)?;(.*) (\d+)$")
@@ -224,12 +243,15 @@ def _role(name: str) -> str:
 @dataclass
 class ActorProfiler:
     """Profiles the first drone actor of the running fleet for ``window_s`` seconds once it flies (``delay_s`` after
-    the first drone actor began its flight), in a background thread; :meth:`report` returns the tables (None when no
+    the first drone actor began its flight), in a background thread; :attr:`result` holds the tables (None when no
     window could be taken: the run ended first). ``drones_per_actor`` and ``speedup`` turn CPU seconds into
-    CPU-seconds per drone per simulated second; ``drones`` is the fleet size (node-level rows)."""
+    CPU-seconds per drone per simulated second; ``drones`` is the fleet size (node-level rows). ``bare_pid``: the
+    process of an idle :class:`~aerodaas.bench.bare_actor.BareActor` beside the fleet, measured over the same window
+    (``"bare_actor"`` in the tables) and left out of the node's rows."""
 
     drones: int
     drones_per_actor: int
+    bare_pid: int | None = None
     speedup: float = 1.0
     window_s: float = 10.0
     delay_s: float = 3.0
@@ -276,14 +298,16 @@ class ActorProfiler:
             pid = self._flying_actor(procs)
         if self._stop.wait(self.delay_s):  # past the take-off (the driver starts every actor's flight at once)
             return None
-        procs = ray_processes()
+        procs = ray_processes(exclude=(self.bare_pid,) if self.bare_pid else ())
         comm = open(f"/proc/{pid}/comm").read().strip()
         node0 = _node_cpu(procs)
-        before, t0 = thread_cpu(pid), time.monotonic()
+        bare0 = process_counts(self.bare_pid)
+        before, wakes0, t0 = thread_cpu(pid), thread_wakes(pid), time.monotonic()
         samples = self._pyspy(pid)
         if samples is None:
             self._stop.wait(self.window_s)
-        after, window = thread_cpu(pid), time.monotonic() - t0
+        after, wakes1, window = thread_cpu(pid), thread_wakes(pid), time.monotonic() - t0
+        bare1 = process_counts(self.bare_pid)
         node1 = _node_cpu(procs)
         per = self.drones_per_actor * window * self.speedup
         actor = attribute(before, after, samples, comm)
@@ -301,7 +325,9 @@ class ActorProfiler:
                 "node_cpu_s_per_drone_per_sim_s": {r: round(v / sim_s, 4) for r, v in
                                                    sorted(node.items(), key=lambda kv: -kv[1])},
                 "node_cpu_s_per_drone_per_sim_s_total": round(sum(node.values()) / sim_s, 4),
-                "actor_pss_mb": smaps_pss(pid)}
+                "actor_wakes_per_s": round((wakes1 - wakes0) / window, 1),
+                "actor_pss_mb": smaps_pss(pid),
+                **({"bare_actor": bare_row(self.bare_pid, bare0, bare1, window, per)} if bare0 and bare1 else {})}
 
     def _pyspy(self, pid: int) -> dict[int, dict[Component, int]] | None:
         """py-spy over the window (blocks for it): tid -> component -> samples; None without py-spy on the PATH.
@@ -318,6 +344,31 @@ class ActorProfiler:
             text = f.read()
         os.unlink(path)
         return parse_pyspy_raw(text)
+
+
+def process_counts(pid: int | None) -> tuple[float, int, int] | None:
+    """Process ``pid``'s (CPU seconds, wakes, threads) so far (:func:`thread_cpu`, :func:`thread_wakes`); None for
+    no pid or when it is gone."""
+    if not pid:
+        return None
+    try:
+        threads = thread_cpu(pid)
+        return sum(t.cpu_s for t in threads.values()), thread_wakes(pid), len(threads)
+    except FileNotFoundError:
+        return None
+
+
+def bare_row(pid: int, c0: tuple[float, int, int], c1: tuple[float, int, int], window: float, per: float) -> dict:
+    """The bare actor's row from its :func:`process_counts` ``c0`` and ``c1`` taken ``window`` seconds apart: its CPU
+    per second (cores) and per ``per`` (drones x window x speed-up of the profiled actor: the floor of that grouping
+    per drone per simulated second), its wakes per second, threads and PSS (MiB; None when it is gone)."""
+    try:
+        pss = round(sum(smaps_pss(pid).values()), 1)
+    except FileNotFoundError:
+        pss = None
+    cpu = c1[0] - c0[0]
+    return {"pid": pid, "cpu_s_per_s": round(cpu / window, 4), "cpu_s_per_drone_per_sim_s": round(cpu / per, 4),
+            "wakes_per_s": round((c1[1] - c0[1]) / window, 1), "threads": c1[2], "pss_mb": pss}
 
 
 def _busiest_threads(pid: int, before: dict[int, ThreadCpu], after: dict[int, ThreadCpu], per: float) -> list[list]:

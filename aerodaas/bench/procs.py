@@ -12,11 +12,11 @@ import psutil
 import ray
 
 
-def ray_processes(nodes: list | None = None) -> list:
+def ray_processes(nodes: list | None = None, exclude: tuple[int, ...] = ()) -> list:
     """psutil.Process objects of this driver's local Ray node — or of ``nodes`` (``ray._private.node.Node``
     handles, e.g. a :class:`~aerodaas.clusters.local.LocalCluster`'s) — (their system processes and all their
-    descendants) and of the driver itself. Raises RuntimeError when Ray was not started by this driver and no
-    ``nodes`` are given."""
+    descendants) and of the driver itself, but the processes ``exclude`` names (pids: a benchmark's own baseline
+    actor). Raises RuntimeError when Ray was not started by this driver and no ``nodes`` are given."""
     if nodes is None:
         node = getattr(ray._private.worker, "_global_node", None)
         if node is None:
@@ -31,7 +31,7 @@ def ray_processes(nodes: list | None = None) -> list:
         procs[p.pid] = p
         for c in p.children(recursive=True):
             procs[c.pid] = c
-    return list(procs.values())
+    return [p for pid, p in procs.items() if pid not in exclude]
 
 
 def memory_mb(procs: list | None = None) -> dict[str, Any]:
@@ -66,10 +66,11 @@ def cpu_seconds(procs: list) -> float:
 
 
 class MemorySampler:
-    """Samples :func:`memory_mb` every ``period_s`` seconds in a background thread; keeps the peak sum."""
+    """Samples :func:`memory_mb` every ``period_s`` seconds in a background thread (of :func:`ray_processes` of
+    ``nodes``, without ``exclude``); keeps the peak sum."""
 
-    def __init__(self, period_s: float = 1.0, nodes: list | None = None) -> None:
-        self.period_s, self.nodes = period_s, nodes
+    def __init__(self, period_s: float = 1.0, nodes: list | None = None, exclude: tuple[int, ...] = ()) -> None:
+        self.period_s, self.nodes, self.exclude = period_s, nodes, exclude
         self.peak: dict[str, Any] = {"rss_mb": 0.0, "pss_mb": 0.0, "processes": 0, "worker_processes": 0, "rows": []}
         self._stop = threading.Event()
         self._t = threading.Thread(target=self._loop, daemon=True)
@@ -77,7 +78,7 @@ class MemorySampler:
     def _loop(self) -> None:
         while not self._stop.is_set():
             try:
-                m = memory_mb(ray_processes(self.nodes))
+                m = memory_mb(ray_processes(self.nodes, self.exclude))
             except Exception:
                 m = None
             if m and m["rss_mb"] > self.peak["rss_mb"]:

@@ -1,5 +1,6 @@
-"""``aerodaas bench fleet --profile``'s measuring parts: the per-thread CPU read from /proc, the
-py-spy stacks classified into components, CPU apportioned between them, PSS split by mapping."""
+"""``aerodaas bench fleet --profile``'s measuring parts: the per-thread CPU and wakes read from /proc, the
+py-spy stacks classified into components, CPU apportioned between them, PSS split by mapping, the bare actor beside
+the fleet (on the pytest worker's shared Ray session)."""
 from __future__ import annotations
 
 import os
@@ -8,8 +9,10 @@ import time
 
 import numpy as np
 
-from aerodaas.bench.fleet_profile import Component, ThreadCpu, attribute, classify_stack, \
-    parse_pyspy_raw, smaps_pss, thread_cpu
+from aerodaas.bench.bare_actor import BareActor
+from aerodaas.bench.fleet_profile import Component, ThreadCpu, attribute, bare_row, classify_stack, \
+    parse_pyspy_raw, process_counts, smaps_pss, thread_cpu, thread_wakes
+from aerodaas.bench.procs import ray_processes
 
 #: stacks as py-spy 0.4 writes them (``--threads --format raw``), taken from a drone actor of the fleet benchmark
 RENDER = ("Thread._bootstrap (threading.py:1002);_worker (concurrent/futures/thread.py:83);DataPlane._guard "
@@ -122,3 +125,45 @@ def test_pss_rows_add_up_to_the_kernels_total(tmp_path):
     assert rows["system libraries and other files"] >= 7.5  # the mapped file, not in a package or the stdlib
     assert any(k == "package numpy" for k in rows)
     del big, mapped
+
+
+def test_thread_wakes_counts_each_time_a_thread_blocks():
+    """A thread that sleeps 30 times blocks (and is woken) at least 30 times: the process's count, read before the
+    thread exits (an exited thread's count is gone), grows by that."""
+    counted: dict = {}
+    release = threading.Event()
+
+    def sleeper() -> None:
+        for _ in range(30):
+            time.sleep(0.001)
+        counted["after"] = thread_wakes(os.getpid())
+        release.set()
+
+    counted["before"] = thread_wakes(os.getpid())
+    th = threading.Thread(target=sleeper)
+    th.start()
+    assert release.wait(60)
+    th.join()
+    assert counted["after"] - counted["before"] >= 30, counted
+
+
+def test_the_bare_actor_is_measured_apart_from_the_nodes_processes(ray_session):
+    """The bench's floor: an idle BareActor in the run's Ray, listed among the node's processes unless excluded,
+    its CPU, wakes, threads and PSS read over a window (Ray's own threads wake it even when nobody calls it)."""
+    import ray
+
+    actor = BareActor.remote()
+    try:
+        pid = ray.get(actor.pid.remote(), timeout=120)
+        assert pid in {p.pid for p in ray_processes()}
+        assert pid not in {p.pid for p in ray_processes(exclude=(pid,))}
+        c0 = process_counts(pid)
+        time.sleep(1.0)
+        c1 = process_counts(pid)
+        row = bare_row(pid, c0, c1, window=1.0, per=2.0)
+        assert row["pid"] == pid and row["threads"] >= 2 and row["wakes_per_s"] > 0, row
+        assert row["cpu_s_per_drone_per_sim_s"] == round((c1[0] - c0[0]) / 2.0, 4)
+        assert 20.0 < row["pss_mb"] < 200.0, row  # a Ray worker: the interpreter and Ray, nothing of the framework
+    finally:
+        ray.kill(actor)
+    assert process_counts(None) is None
