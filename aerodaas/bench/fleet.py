@@ -151,7 +151,8 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
     kept); returns the measured row (with ``nodes`` on a cluster). ``profile``: also the cost table of one drone
     actor and of the node's processes (:class:`~aerodaas.bench.fleet_profile.ActorProfiler`, local Ray only), as
     ``"profile"`` in the row, with an idle :class:`~aerodaas.bench.bare_actor.BareActor` measured beside the fleet
-    (left out of the row's processes, CPU and memory). ``camera`` False: the drones fly without cameras (no frame is made or analysed)."""
+    (left out of the row's processes, CPU and memory). ``camera`` False: the drones fly without cameras (no frame is
+    made or analysed)."""
     ray_start.shutdown_ray()
     opts = RunOptions(progress=False)
     cluster = edge_nodes is not None
@@ -169,8 +170,8 @@ def run_size(n: int, duration_s: float, drones_per_actor: int = 1, edge_nodes: i
         try:
             ray_start.ensure_ray(opts.address)
             prof, floor, bare = None, None, ()
-            if profile and not cluster:  # the floor, measured beside the fleet and left out of its rows (the
-                floor = BareActor.remote()  # handle kept: Ray ends an actor whose handles are gone)
+            if profile and not cluster:  # the floor, measured beside the fleet and left out of its rows; the
+                floor = BareActor.remote()  # handle is kept to the end (Ray ends an actor whose handles are gone)
                 bare = (ray.get(floor.pid.remote(), timeout=120),)
             time.sleep(2.0)  # let Ray's own processes settle before measuring
             procs = ray_processes(nodes, bare)
