@@ -209,9 +209,9 @@ FIRST_LANES = (REALTIME_LANE, WAITING_LANE)
 
 def lane(item) -> str:
     """The ``xdist_group`` of any test: a slow test's :func:`slow_lane`; a development-tier test's file name,
-    :data:`WAITING_LANE` for the files of :data:`WAITING_FILES`, or :data:`ARCHITECTURE_LANE`. Under ``--dist loadgroup`` (both tiers, as the README
-    runs them) a file stays on one worker with its module fixtures; under ``--dist loadfile`` the marks change
-    nothing."""
+    :data:`WAITING_LANE` for the files of :data:`WAITING_FILES`, or :data:`ARCHITECTURE_LANE`. Under ``--dist
+    loadgroup`` (both tiers, as the README runs them) a file stays on one worker with its module fixtures; under
+    ``--dist loadfile`` the marks change nothing."""
     if item.get_closest_marker("slow"):
         return slow_lane(item)
     if item.path.parent.name == "architecture" and item.path.name not in ARCHITECTURE_OWN_UNITS:

@@ -34,7 +34,8 @@ def test_packed_drones_without_cameras_fly_and_make_no_frame(tmp_path):
     cpu = row["drone_actor_cpu_s_per_drone_per_sim_s"]
     assert cpu["camera frame making"] == cpu["analytics process calls"] == cpu["recorded frames' JPEG encode"] == 0
     assert cpu["framework"] == cpu["all"] == row["framework_cpu_s_per_drone_per_sim_s"] > 0, cpu
-    # the profile's window (5 s, from 3 s into the 10 s flight): the drone actor beside the bare actor, the floor of any actor
+    # the profile's window (5 s, from 3 s into the 10 s flight): the drone actor beside the bare actor, the floor
+    # of any actor
     prof = row["profile"]
     assert prof["drones_in_actor"] == 2 and prof["actor_wakes_per_s"] > 0, prof
     bare = prof["bare_actor"]
