@@ -19,7 +19,7 @@ pytestmark = pytest.mark.e2e
 def test_packed_drones_without_cameras_fly_and_make_no_frame(tmp_path):
     out = tmp_path / "fleet.json"
     p = subprocess.run([sys.executable, "-m", "aerodaas.cli", "bench", "fleet", "--run", "4:2", "--no-camera",
-                        "--duration", "10", "--profile", "--out", str(out)], cwd=tmp_path, capture_output=True,
+                        "--duration", "12", "--profile", "--out", str(out)], cwd=tmp_path, capture_output=True,
                        text=True, timeout=600, env=dict(os.environ))
     assert p.returncode == 0, p.stderr[-2000:]
     rep = json.loads(out.read_text())
@@ -34,7 +34,7 @@ def test_packed_drones_without_cameras_fly_and_make_no_frame(tmp_path):
     cpu = row["drone_actor_cpu_s_per_drone_per_sim_s"]
     assert cpu["camera frame making"] == cpu["analytics process calls"] == cpu["recorded frames' JPEG encode"] == 0
     assert cpu["framework"] == cpu["all"] == row["framework_cpu_s_per_drone_per_sim_s"] > 0, cpu
-    # the profile's window (5 s, from 3 s into the 10 s flight): the drone actor beside the bare actor, the floor
+    # the profile's window (6 s, from 3 s into the 12 s flight): the drone actor beside the bare actor, the floor
     # of any actor
     prof = row["profile"]
     assert prof["drones_in_actor"] == 2 and prof["actor_wakes_per_s"] > 0, prof
