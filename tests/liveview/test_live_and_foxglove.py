@@ -463,17 +463,20 @@ def test_stop_waits_for_a_client_that_follows_every_channel_and_not_for_one_that
     """At the end of a run the server waits (bounded) for a client that follows every channel to subscribe to the
     ones advertised last (the mission result), and not for one that follows only a few (Foxglove's app, its panels'
     topics). Measured on a fake clock: how long stop() waited before it closed."""
-    import time as _time
+    from types import SimpleNamespace
 
     from aerodaas.liveview import server as srv_mod
     from aerodaas.liveview.server import LiveServer
 
     def waited(subs: set[str]) -> float:
+        # the server module's own clock, not the process's ``time`` module: another thread of this process that
+        # sleeps meanwhile (Ray's, a profiler's) must not move it
         clock = [1000.0]
-        monkeypatch.setattr(srv_mod.time, "monotonic", lambda: clock[0])
-        monkeypatch.setattr(srv_mod.time, "sleep", lambda s: clock.__setitem__(0, clock[0] + s))
-        srv = LiveServer("127.0.0.1:0")
-        try:
+        fake = SimpleNamespace(monotonic=lambda: clock[0], sleep=lambda s: clock.__setitem__(0, clock[0] + s),
+                               time=lambda: clock[0])
+        with monkeypatch.context() as m:
+            m.setattr(srv_mod, "time", fake)
+            srv = LiveServer("127.0.0.1:0")
             for t in ("/old", "/older", "/mission/result"):
                 srv.advertise(t, "aerodaas.X", "jsonschema", b"{}", "json")
             srv._born["/old"] = srv._born["/older"] = clock[0] - 600.0  # advertised long ago; the result just now
@@ -481,9 +484,6 @@ def test_stop_waits_for_a_client_that_follows_every_channel_and_not_for_one_that
             t0 = clock[0]
             srv.stop(linger_s=0.5)
             return clock[0] - t0 - 0.5
-        finally:
-            monkeypatch.setattr(srv_mod.time, "monotonic", _time.monotonic)
-            monkeypatch.setattr(srv_mod.time, "sleep", _time.sleep)
 
     assert waited({"/old", "/older", "/mission/result"}) < 0.1             # has everything: no wait
     assert waited({"/old"}) < 0.1                                           # follows a few: not waited for
