@@ -7,7 +7,9 @@ import os
 from aerodaas.clusters import reaper
 from aerodaas.clusters.node_priority import AGENT_NICE_DELTA, may_lower_niceness
 
-#: the node's process kinds, by the text of their command lines (the agents' process titles), first match wins
+#: the node's process kinds, by the first word of their command lines (the binaries' paths, the agents' process
+#: titles), first match wins; a Ray worker still starting (no title yet) names ``.../sockets/raylet`` in its
+#: arguments and is none of them
 KINDS = ("gcs_server", "raylet", "DashboardAgent", "RuntimeEnvAgent")
 
 
@@ -33,7 +35,8 @@ def node_nices(root: int) -> dict[str, list[list[int]]]:
             nices = thread_nices(pid)
         except OSError:
             continue
-        kind = next((k for k in KINDS if k in cmd), None)  # the agents' titles: ray::DashboardAgent, ...
+        first = cmd.split(" ", 1)[0]  # .../raylet/raylet, .../gcs_server, ray::DashboardAgent, ...
+        kind = next((k for k in KINDS if k in first), None)
         if kind is not None:
             out[kind].append(nices)
     return out
