@@ -68,12 +68,32 @@ class RecorderWatch:
         except Exception:  # noqa: BLE001 - a watch never ends the run
             self._ref = None
 
-    def _seen(self, st: dict) -> None:
+    def settle(self, timeout_s: float = 10.0) -> None:
+        """The drones are done: ask the recorder once more and wait for its answer (at most ``timeout_s`` seconds,
+        wall), so that a restart in the last poll period is seen before the run ends (its "recording lost" line, the
+        count in ``restarts``) and the live view of a port chosen at start is served again, awaited as well, before
+        the run's last messages (the mission result). Never raises: a recorder that does not answer is left to the
+        run's end, which reports it."""
+        import ray  # lazy: heavy ray
+
+        if self.recorder is None:
+            return
+        self._ref = None
+        try:
+            again = self._seen(ray.get(self.recorder.status.remote(), timeout=timeout_s))
+            if again is not None:
+                ray.get(again, timeout=timeout_s)
+        except Exception:  # noqa: BLE001 - a watch never ends the run
+            pass
+
+    def _seen(self, st: dict) -> Any:
+        """Take the recorder's status ``st``; a new process is a restart. Returns the ObjectRef of the call that
+        serves the live view again, or None."""
         if self.pid is None or st["pid"] == self.pid:
             self.pid = st["pid"]
             self.last_t_ns = st.get("last_t_ns") or self.last_t_ns
             self.live_url = st.get("live_url") or self.live_url
-            return
+            return None
         self.pid = st["pid"]
         self.restarts += 1
         at = None if self.last_t_ns is None else (self.last_t_ns - self.epoch_ns) / 1e9
@@ -86,6 +106,7 @@ class RecorderWatch:
         try:
             self.recorder.keep_specs.remote(*recorder_specs(self.plan))
             if self.live_url and not st.get("live_url"):  # the live view where the first recorder bound it
-                self.recorder.serve_live.remote(self.live_url.split("://", 1)[-1])
+                return self.recorder.serve_live.remote(self.live_url.split("://", 1)[-1])
         except Exception:  # noqa: BLE001
             pass
+        return None

@@ -143,6 +143,7 @@ def supervise(plan: Any, actors: dict, handles: dict, timeout: float | None, pro
                 elif time.monotonic() - last_print > 5.0:
                     print("\n".join(lines), flush=True)
                     last_print = time.monotonic()
+        watch.settle()  # a recorder restarted in the watch's last period: seen before the run's end
     except KeyboardInterrupt:
         interrupted = True
         _interrupt(handles, refs, reports, robots_of)
