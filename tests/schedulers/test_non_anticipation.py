@@ -114,12 +114,14 @@ def _before(res, cut):
 
 def cuts(trace, n_uniform: int = 6, n_arrivals: int = 8, seed: int = 3, start_ms: float = 1000.0) -> list[float]:
     """Cut points: ``n_uniform`` uniform in the trace's span, and 1 ms and 1 µs before ``n_arrivals`` arrivals
-    picked at random (not before ``start_ms``: the first second, where little has happened yet)."""
+    picked at random; every one after ``start_ms`` (the first second, where little has happened yet) and after the
+    trace's first arrival (before it nothing can be decided, and a random trace's first frame can come after 1 s)."""
     rng = random.Random(seed)
     span = trace[-1].arrival_ms
-    arr = sorted({t.arrival_ms for t in trace if t.arrival_ms > start_ms})
+    lo = max(start_ms, min(t.arrival_ms for t in trace))
+    arr = sorted({t.arrival_ms for t in trace if t.arrival_ms - 1.0 > lo})
     picks = rng.sample(arr, min(n_arrivals, len(arr)))
-    return sorted([rng.uniform(start_ms, span) for _ in range(n_uniform)] + [a - 1.0 for a in picks]
+    return sorted([rng.uniform(lo, span) for _ in range(n_uniform)] + [a - 1.0 for a in picks]
                   + [a - 0.001 for a in picks])
 
 
@@ -229,6 +231,18 @@ def check(policy, w, *, secret: bool = True, warm_up: bool = True, every: int = 
 
 def _heavy() -> Workload:
     return Workload.from_file(WORKLOAD_JSON, "HEAVY")
+
+
+@needs_workload
+def test_every_cut_comes_after_the_traces_first_arrival():
+    """A trace whose first frame comes after the first second (one in about 500 secret traces): no cut lands before
+    that frame, where the reference run cannot have decided anything, even with every arrival picked."""
+    a = cut_trace(_heavy(), PUBLIC[0])
+    late = [AnalyticsTask(t.task_id, t.drone, t.model, t.arrival_ms + 1500.0, t.deadline_ms + 1500.0) for t in a]
+    first = late[0].arrival_ms
+    assert first > 1000.0
+    points = cuts(late, n_arrivals=len(late))
+    assert len(points) > 6 and min(points) > first, (first, points[:4])
 
 
 @needs_workload
