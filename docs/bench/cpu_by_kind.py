@@ -25,6 +25,8 @@ RAY_SCRIPTS = {"agent.py": "ray:dashboard_agent", "log_monitor.py": "ray:log_mon
 #: a title Ray gives one of its node's Python processes -> its kind
 RAY_TITLES = {"DashboardAgent": "ray:dashboard_agent", "RuntimeEnvAgent": "ray:runtime_env_agent",
               "IDLE": "ray-worker:idle"}
+#: a command (its binary, its script or ``-m`` module) -> its kind
+COMMANDS = {"pytest": "pytest", "aerodaas": "aerodaas-cli", "aerodaas.cli": "aerodaas-cli"}
 #: (pid, start time) -> [kind, CPU-s at the first sample, CPU-s at the last]
 seen: dict = {}
 
@@ -61,12 +63,11 @@ def kind(pid: str):
             return RAY_SCRIPTS[os.path.basename(script)]
         if script == "-c" and "import sys;exec(eval(sys.stdin.readline()))" in " ".join(argv):
             return "pytest-worker"
-        if script in ("-m pytest", "-m aerodaas.cli") or script.endswith("/pytest"):
-            return "pytest" if "pytest" in script else "aerodaas-cli"
+        name = os.path.basename(script.removeprefix("-m "))
+        if name in COMMANDS:
+            return COMMANDS[name]
         return "python:" + (script if script != "-c" else " ".join(argv[1:4]))[-60:]
-    if name in ("pytest", "aerodaas"):
-        return name if name == "pytest" else "aerodaas-cli"
-    return "other:" + name[-30:]
+    return COMMANDS.get(name, "other:" + name[-30:])
 
 
 def snap() -> None:
