@@ -278,8 +278,9 @@ class DroneComponent:
 
     def status(self) -> dict:
         b, now = self.backend, self.backend.state()
-        cam_drop = sum(c["comp"].dropped_at_camera for c in self.cameras)
+        cam_drop, rec = sum(c["comp"].dropped_at_camera for c in self.cameras), self.recorder
         return {"robot": self.cfg.id, "t": now.t, "state": self.fsm.state.value,
+                "clock_held_s": 0.0 if rec is None else round(rec.hold.spent_s(), 3),
                 "position": [float(v) for v in now.position], "battery_pct": None if now.battery_pct is None else float(now.battery_pct),
                 "visited": len(self.visited), "preplanned_total": self.flight.preplanned_total,
                 "preplanned_reached": self.flight.preplanned_reached, "cameras": len(self.cameras),
@@ -293,9 +294,7 @@ class DroneComponent:
         f = self.flight
         return {**self.status(), "visited_waypoints": f.visited, "events": self.events, "error": self.error,
                 "rejected": f.rejected, "hold_failed": f.hold_failed, "not_reached": self.progress.not_reached,
-                "ended": self.end.ended,
-                "failsafe": f.failsafe,
-                "safety": self.gate.stats(),
+                "ended": self.end.ended, "failsafe": f.failsafe, "safety": self.gate.stats(),
                 "state_history": [(t, s.value) for t, s in self.fsm.history]}
 
     # ------------------------------------------------------------------ odometry (the drone's odometry object)

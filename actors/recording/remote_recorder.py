@@ -83,12 +83,19 @@ class FrameHold:
     def __init__(self, budget_s: float = 0.0) -> None:
         self.budget_s = max(0.0, float(budget_s))
         self.held_s = 0.0
+        self._since: float | None = None  # time.monotonic() at the start of the wait in progress
+
+    def spent_s(self) -> float:
+        """Wall seconds waited so far, the wait in progress included (any thread may ask; :attr:`held_s` counts a
+        wait only once it is over)."""
+        since = self._since
+        return self.held_s + (0.0 if since is None else max(0.0, time.monotonic() - since))
 
     def wait(self, room: threading.Condition, ready: Callable[[], bool], poll_s: float = 0.1) -> None:
         """Wait on ``room`` (its lock held by the caller) until ``ready()`` or the budget is spent."""
         if ready() or self.held_s >= self.budget_s:
             return
-        t0 = time.monotonic()
+        t0 = self._since = time.monotonic()
         try:
             while not ready():
                 left = self.budget_s - self.held_s - (time.monotonic() - t0)
@@ -97,6 +104,7 @@ class FrameHold:
                 room.wait(min(poll_s, left))
         finally:
             self.held_s += time.monotonic() - t0
+            self._since = None
 
 
 class RemoteRecorder(AnalyticsAccounting):

@@ -21,13 +21,15 @@ from typing import Any
 from mcap.reader import make_reader
 
 from aerodaas.recording.segments import segment_path
-from aerodaas.reliability.procs import (REPO_APPS, actor_pids, mcap_reader_ok, no_crash, run_cli, summary_outcome,
-                                        wait_size)
+from aerodaas.reliability.procs import (REPO_APPS, OutputTail, actor_pids, mcap_reader_ok, no_crash, run_cli,
+                                        summary_outcome, wait_size)
 
 __all__ = ["ACCOUNTING_FAULTS", "STREAM_STALL", "file_losses", "stream_shedding", "summary_losses"]
 
-#: how long the recorder actor is stopped (s)
+#: how long the recorder actor is stopped (s); at least this long where the clock is to wait for it
 STALL_S = 20.0
+#: the longest a recorder actor is kept stopped while waiting for the clock to be held (s)
+STALL_LIMIT_S = 300.0
 
 
 def file_losses(paths: list[Path]) -> tuple[dict[str, int], list[str]]:
@@ -111,20 +113,43 @@ def _stop_recorder(p: Any, rec: Path) -> tuple[bool, list[int]]:
     return reached, pids
 
 
+def _stop_recorder_until_held(p: Any, rec: Path, tail: OutputTail, need_s: float) -> tuple[bool, list[int]]:
+    """Once ``rec`` holds 20 kB: SIGSTOP of the run's recorder actor until its live progress (``tail``) shows the
+    simulated clock held at least ``need_s`` wall s for the recorder, and :data:`STALL_S` s at least, then SIGCONT.
+    The clock waits only once the drone's recorder buffer is full, which a loaded machine reaches later than a
+    quiet one: a fixed stall may end before any wait. Returns (the size was reached, the pids stopped)."""
+    reached = wait_size(rec, 20000, p)
+    pids = actor_pids(p.pid, "RecorderActor") if reached else []
+    for pid in pids:
+        os.kill(pid, signal.SIGSTOP)
+    t0 = time.monotonic()
+    while pids and p.poll() is None and time.monotonic() - t0 < STALL_LIMIT_S:
+        shown = [float(x) for x in re.findall(r"clock held ([\d.]+) s for the recorder$", "".join(tail.lines()),
+                                              re.MULTILINE)]
+        if time.monotonic() - t0 >= STALL_S and shown and max(shown) >= need_s:
+            break
+        time.sleep(0.2)
+    for pid in pids:
+        os.kill(pid, signal.SIGCONT)
+    return reached, pids
+
+
 def _recorder_stall(tmp: Path, hold_s: float | None = None) -> dict:
-    """SIGSTOP of the recorder actor for :data:`STALL_S` s mid-flight, then SIGCONT. ``hold_s``: the run's
-    ``--recorder-hold`` (None: the default, longer than the stall: the simulated clock waits and nothing is lost;
-    shorter: frames are shed past it and the run ends ``recording_lost``). Clean when the outcome tells the file's
-    truth and the summary says how long the clock was held exactly when it was."""
+    """SIGSTOP of the recorder actor mid-flight until the clock has waited for it (:func:`_stop_recorder_until_held`),
+    then SIGCONT. ``hold_s``: the run's ``--recorder-hold`` (None: the default, longer than the stall: the simulated
+    clock waits and nothing is lost; shorter: the recorder stays stopped until it is spent, frames are shed past it
+    and the run ends ``recording_lost``). Clean when the outcome tells the file's truth and the summary says how long
+    the clock was held exactly when it was."""
     rec = tmp / "run.mcap"
     hold = [] if hold_s is None else ["--recorder-hold", f"{hold_s:g}"]
-    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", "--quiet", *hold],
-             start_new_session=True)
-    reached, pids = _stop_recorder(p, rec)
-    out, _ = p.communicate(timeout=900)
+    p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", *hold],
+                start_new_session=True)
+    tail = OutputTail(p)
+    reached, pids = _stop_recorder_until_held(p, rec, tail, 1.5 if hold_s is None else hold_s)
+    out = tail.finish(900)
     said_held = re.findall(r"simulated clock held ([\d.]+) s for the recorder", out)
     res = accounting_verdict(p, out, rec, reached and len(pids) == 1, bool(said_held),
-                             (f"recorder actor stopped for {STALL_S:g} s" if pids else "recorder actor not found")
+                             ("recorder actor stopped until the clock waited" if pids else "recorder actor not found")
                              + f"; the summary says the clock was held {', '.join(said_held) or 'never'} s")
     res["held_s"] = [float(x) for x in said_held]
     return res
@@ -364,10 +389,12 @@ def _analytics_killed_twice(tmp: Path) -> dict:
 
 #: (name, expected end, scenario(tmp folder) -> {"observed", "clean", ...}), joined to the fault catalogue
 ACCOUNTING_FAULTS = [
-    (f"SIGSTOP of the recorder actor for {STALL_S:g} s mid-run, then SIGCONT", "the simulated clock waits for the "
+    (f"SIGSTOP of the recorder actor mid-run until the clock waits for it (at least {STALL_S:g} s), then SIGCONT",
+     "the simulated clock waits for the "
      "recorder (the summary says how long): exit 0, success, and the file lacks no numbered message (mcap's reader: "
      "/run/accounting against the messages)", _recorder_stall),
-    (f"SIGSTOP of the recorder actor for {STALL_S:g} s mid-run with --recorder-hold 2", "the clock waits 2 s, then "
+    (f"SIGSTOP of the recorder actor mid-run with --recorder-hold 2, until that hold is spent (at least {STALL_S:g} s)",
+     "the clock waits 2 s, then "
      "frames are shed: exit 4 and recording_lost, the summary's lost counts per channel equal what the file lacks",
      lambda tmp: _recorder_stall(tmp, hold_s=2.0)),
     (STREAM_STALL, "a live stream cannot wait: the clock is never held (no clock_held event, no \"simulated clock "

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,35 @@ def run_cli(args: list[str], env: dict | None = None, **kw: Any) -> subprocess.P
     """``python -m aerodaas.cli ARGS`` as a child process (stdout and stderr merged, text), ``env`` over ours."""
     return subprocess.Popen([sys.executable, "-m", "aerodaas.cli", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, env={**os.environ, **(env or {})}, **kw)
+
+
+class OutputTail:
+    """The output of a :func:`run_cli` process, read line by line on a thread while the process runs, so a fault
+    case can act on what it prints (:meth:`lines`) and still get all of it at the end (:meth:`finish`)."""
+
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self.proc = proc
+        self._lines: list[str] = []
+        self._reader = threading.Thread(target=self._read, daemon=True, name="output-tail")
+        self._reader.start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self._lines.append(line)
+
+    def lines(self) -> list[str]:
+        """The lines printed so far."""
+        return list(self._lines)
+
+    def finish(self, timeout_s: float) -> str:
+        """Everything the process printed, once it ended (killed after ``timeout_s`` s)."""
+        try:
+            self.proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self._reader.join(timeout=30)
+        return "".join(self._lines)
 
 
 def wait_size(path: Path, size: int, proc: subprocess.Popen, limit_s: float = 480.0) -> bool:

@@ -252,7 +252,7 @@ def _record_result(recorder: Any, plan: Any, rid: str, rep: dict) -> None:
 
 def progress_lines(handles: dict, t0: float) -> list[str]:
     """One line per flying drone: time, state, waypoints, position, battery, camera FPS (a drone with a camera),
-    detections, link."""
+    detections, link, and the wall seconds its clock has waited for the recorder so far (a simulated run)."""
     import ray  # lazy: heavy ray
 
     lines = []
@@ -278,6 +278,8 @@ def progress_lines(handles: dict, t0: float) -> list[str]:
                     dets += f" (cloud {cloud})"
         x, y, z = st["position"]
         link = "" if st.get("link_ok", True) else " LINK LOST"
+        if st.get("clock_held_s"):  # a simulated run's clock has waited for its recorder (recorder_hold_s)
+            link += f" clock held {st['clock_held_s']:.1f} s for the recorder"
         cam = f" camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}" if st.get("cameras", 1) else ""
         lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint "
                      f"{waypoint_count(st['visited'], st['preplanned_total'], st.get('preplanned_reached'))} "

@@ -59,12 +59,14 @@ def test_a_held_recorder_service_makes_the_camera_wait_and_loses_no_frame(tmp_pa
     prod.start()
     prod.join(timeout=3.0)
     assert prod.is_alive() and prod.started < 12, "the camera did not wait for the recorder"
+    # the wait in progress is seen by any thread (the drone's status) before it is over
+    assert svc.hold.held_s == 0.0 and svc.hold.spent_s() > 0.0
     gate.set()
     prod.join(timeout=120)
     svc.close()
     assert not prod.is_alive() and prod.refused == 0 and svc.frames_dropped == 0
     assert _frames_in(path) == 12
-    assert svc.hold.held_s > 0.0
+    assert svc.hold.spent_s() == svc.hold.held_s > 0.0
 
 
 def test_past_its_budget_the_hold_drops_and_counts_as_before(tmp_path):

@@ -45,7 +45,7 @@ def test_fault_ends_clean(name):
 @pytest.mark.e2e
 @pytest.mark.parametrize("name", [n for n, _, _ in ACCOUNTING_FAULTS if n != STREAM_STALL])
 def test_stalls_deaths_and_slow_clients_end_with_the_files_truth(name):
-    """A recorder stalled 20 s ends success with nothing lost (the simulated clock waits for it, and the summary
+    """A recorder stalled until the simulated clock has waited for it ends success with nothing lost (the summary
     says how long); stalled past ``--recorder-hold``, killed twice, or an analytics killed twice, each ends
     not-success (exit 4, recording_lost) with the summary's lost count per channel equal to what the file lacks,
     read with mcap's reader (the producers' counts in /run/accounting less the messages in every segment); a live
