@@ -250,7 +250,8 @@ def test_autopilot_mission_holds_and_reaches(session, autopilot):
 def test_mission_upload_start(session, autopilot):
     """`aerodaas mission upload FILE --start --max-speed 2` on the landed vehicle: uploaded with a DO_CHANGE_SPEED
     2 m/s inserted after the take-off (said; ArduCopter's whole seconds and centimetres said too), armed, flown by the autopilot at no more than that + 10 % (an observer
-    on the link sees both waypoints at 2 m) and landed. The speed: the estimate's velocity on ArduCopter; on stock PX4
+    on the link sees the vehicle reach both waypoints: within 1 m on ArduCopter, at 2 m; on PX4 within its own
+    reached check's radius, :data:`tests.firmware.sitl.PX4_NAV_ACC_RAD_M`) and landed. The speed: the estimate's velocity on ArduCopter; on stock PX4
     SIH, whose position estimate stalls and catches up (one run: 6 m in 2 s, 3.7 m/s, over 4 s 1.97 m/s), the
     distance the estimate moved over every >= 4 s of vehicle time (:func:`test_speed_stays_within_the_limit`). On
     PX4 this catches a runaway, not a missing cap: on these 6 m legs the vehicle never reaches its 5 m/s cruise
@@ -269,9 +270,10 @@ def test_mission_upload_start(session, autopilot):
     pts = [(s[1], s[2], s[3]) for s in obs["samples"]]
     # PX4 judged horizontally, as its own reached check is: the observer never arms, so its height is PX4's
     # relative_alt, which drifts on SIH (see test_three_vehicles_behind_one_router_port)
-    n = 2 if autopilot == "px4" else 3
+    n, radius = (2, sitl.PX4_NAV_ACC_RAD_M) if autopilot == "px4" else (3, 1.0)
     for wp in ((0.0, 6.0, 2.0), (6.0, 6.0, 2.0)):
-        assert min(math.dist(p[:n], wp[:n]) for p in pts) < 1.0, wp
+        closest = min(math.dist(p[:n], wp[:n]) for p in pts)
+        assert closest < radius, (wp, closest)
     v = max(math.hypot(s[4], s[5]) for s in obs["samples"])
     flown = flown_speed([{"t": s[0], "position": s[1:4]} for s in obs["samples"]], 4.0)
     print(f"{autopilot} mission upload --start: max speed {v:.2f} m/s, flown over 4 s {flown:.2f} m/s (--max-speed 2)")
