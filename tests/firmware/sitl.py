@@ -58,10 +58,6 @@ HOLD_RADIUS = {"ardupilot": 0.3, "px4": 1.0}
 #: PX4 counts a multicopter waypoint reached within the acceptance radius horizontally and this (m) in altitude
 #: (NAV_MC_ALT_RAD, default 0.8; navigator mission_block.cpp): its hold may be up to hypot(HOLD_RADIUS, this) away
 PX4_ALT_RAD_M = 0.8
-#: PX4 counts a multicopter waypoint without an acceptance radius of its own (a mission file's param2 0) reached
-#: within NAV_ACC_RAD horizontally (m): 2 for the SIH quadrotor (airframe 10040_sihsim_quadx sources
-#: etc/init.d/rc.mc_defaults, ``param set-default NAV_ACC_RAD 2``); its hold there need not bring it closer
-PX4_NAV_ACC_RAD_M = 2.0
 
 
 def namespace_skip_reason() -> str | None:

@@ -247,16 +247,22 @@ def test_autopilot_mission_holds_and_reaches(session, autopilot):
     assert len(reached) == len(set(reached)), reached
 
 
+#: PX4 counts a multicopter waypoint without an acceptance radius of its own (a mission file's param2 0) reached
+#: within NAV_ACC_RAD horizontally (m): 2 for the SIH quadrotor (airframe 10040_sihsim_quadx sources
+#: etc/init.d/rc.mc_defaults, ``param set-default NAV_ACC_RAD 2``); its hold there need not bring it closer
+PX4_NAV_ACC_RAD_M = 2.0
+
+
 def test_mission_upload_start(session, autopilot):
-    """`aerodaas mission upload FILE --start --max-speed 2` on the landed vehicle: uploaded with a DO_CHANGE_SPEED
-    2 m/s inserted after the take-off (said; ArduCopter's whole seconds and centimetres said too), armed, flown by the autopilot at no more than that + 10 % (an observer
-    on the link sees the vehicle reach both waypoints: within 1 m on ArduCopter, at 2 m; on PX4 within its own
-    reached check's radius, :data:`tests.firmware.sitl.PX4_NAV_ACC_RAD_M`) and landed. The speed: the estimate's velocity on ArduCopter; on stock PX4
-    SIH, whose position estimate stalls and catches up (one run: 6 m in 2 s, 3.7 m/s, over 4 s 1.97 m/s), the
-    distance the estimate moved over every >= 4 s of vehicle time (:func:`test_speed_stays_within_the_limit`). On
-    PX4 this catches a runaway, not a missing cap: on these 6 m legs the vehicle never reaches its 5 m/s cruise
-    (without ``--max-speed``: 2.47 m/s at most, 1.34 over 4 s); the cap itself is checked by the read-back (the
-    vehicle holds the 5 items sent, the speed change among them)."""
+    """`aerodaas mission upload FILE --start --max-speed 2` on the landed vehicle: uploaded with a DO_CHANGE_SPEED 2 m/s
+    inserted after the take-off (said; ArduCopter's whole seconds and centimetres said too), armed, flown by the
+    autopilot at no more than that + 10 % (an observer on the link sees the vehicle reach both waypoints: within 1 m
+    on ArduCopter, at 2 m; on PX4 within its own reached check's radius, :data:`PX4_NAV_ACC_RAD_M`) and landed. The
+    speed: the estimate's velocity on ArduCopter; on stock PX4 SIH, whose position estimate stalls and catches up
+    (one run: 6 m in 2 s, 3.7 m/s, over 4 s 1.97 m/s), the distance the estimate moved over every >= 4 s of vehicle
+    time (:func:`test_speed_stays_within_the_limit`). On PX4 this catches a runaway, not a missing cap: on these 6 m
+    legs the vehicle never reaches its 5 m/s cruise (without ``--max-speed``: 2.47 m/s at most, 1.34 over 4 s); the
+    cap itself is checked by the read-back (the vehicle holds the 5 items sent, the speed change among them)."""
     up = session["upload"]
     assert up["rc"] == 0, up["out"][-2000:]
     assert "inserted: DO_CHANGE_SPEED 2 m/s (--max-speed 2 m/s" in up["out"], up["out"][-2000:]
@@ -270,7 +276,7 @@ def test_mission_upload_start(session, autopilot):
     pts = [(s[1], s[2], s[3]) for s in obs["samples"]]
     # PX4 judged horizontally, as its own reached check is: the observer never arms, so its height is PX4's
     # relative_alt, which drifts on SIH (see test_three_vehicles_behind_one_router_port)
-    n, radius = (2, sitl.PX4_NAV_ACC_RAD_M) if autopilot == "px4" else (3, 1.0)
+    n, radius = (2, PX4_NAV_ACC_RAD_M) if autopilot == "px4" else (3, 1.0)
     for wp in ((0.0, 6.0, 2.0), (6.0, 6.0, 2.0)):
         closest = min(math.dist(p[:n], wp[:n]) for p in pts)
         assert closest < radius, (wp, closest)
