@@ -277,6 +277,7 @@ class DroneComponent:
         return self._end_req
 
     def status(self) -> dict:
+        """The live state for the driver's progress line (``clock_held_s``: this actor's clock's waits, wall s)."""
         b, now = self.backend, self.backend.state()
         cam_drop, rec = sum(c["comp"].dropped_at_camera for c in self.cameras), self.recorder
         return {"robot": self.cfg.id, "t": now.t, "state": self.fsm.state.value,

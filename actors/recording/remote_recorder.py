@@ -84,18 +84,21 @@ class FrameHold:
         self.budget_s = max(0.0, float(budget_s))
         self.held_s = 0.0
         self._since: float | None = None  # time.monotonic() at the start of the wait in progress
+        self._seen = threading.Lock()  # held_s and _since change together for spent_s
 
     def spent_s(self) -> float:
         """Wall seconds waited so far, the wait in progress included (any thread may ask; :attr:`held_s` counts a
         wait only once it is over)."""
-        since = self._since
-        return self.held_s + (0.0 if since is None else max(0.0, time.monotonic() - since))
+        with self._seen:
+            since, held = self._since, self.held_s
+        return held + (0.0 if since is None else max(0.0, time.monotonic() - since))
 
     def wait(self, room: threading.Condition, ready: Callable[[], bool], poll_s: float = 0.1) -> None:
         """Wait on ``room`` (its lock held by the caller) until ``ready()`` or the budget is spent."""
         if ready() or self.held_s >= self.budget_s:
             return
-        t0 = self._since = time.monotonic()
+        with self._seen:
+            t0 = self._since = time.monotonic()
         try:
             while not ready():
                 left = self.budget_s - self.held_s - (time.monotonic() - t0)
@@ -103,8 +106,9 @@ class FrameHold:
                     return
                 room.wait(min(poll_s, left))
         finally:
-            self.held_s += time.monotonic() - t0
-            self._since = None
+            with self._seen:
+                self.held_s += time.monotonic() - t0
+                self._since = None
 
 
 class RemoteRecorder(AnalyticsAccounting):

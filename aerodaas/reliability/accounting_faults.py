@@ -113,43 +113,51 @@ def _stop_recorder(p: Any, rec: Path) -> tuple[bool, list[int]]:
     return reached, pids
 
 
-def _stop_recorder_until_held(p: Any, rec: Path, tail: OutputTail, need_s: float) -> tuple[bool, list[int]]:
+def _stop_recorder_until_held(p: Any, rec: Path, tail: OutputTail, need_s: float) -> tuple[bool, list[int], float]:
     """Once ``rec`` holds 20 kB: SIGSTOP of the run's recorder actor until its live progress (``tail``) shows the
-    simulated clock held at least ``need_s`` wall s for the recorder, and :data:`STALL_S` s at least, then SIGCONT.
-    The clock waits only once the drone's recorder buffer is full, which a loaded machine reaches later than a
-    quiet one: a fixed stall may end before any wait. Returns (the size was reached, the pids stopped)."""
+    simulated clock held at least ``need_s`` wall s for the recorder, and :data:`STALL_S` s at least, then SIGCONT
+    (also on an error). The clock waits only once the drone's recorder buffer is full, which a loaded machine reaches
+    later than a quiet one: a fixed stall may end before any wait. It also ends when the run ends or after
+    :data:`STALL_LIMIT_S` s. Returns (the size was reached, the pids stopped, the longest hold the progress showed
+    while they were stopped: wall s, 0.0 when none)."""
     reached = wait_size(rec, 20000, p)
     pids = actor_pids(p.pid, "RecorderActor") if reached else []
+    shown: list[float] = []
     for pid in pids:
         os.kill(pid, signal.SIGSTOP)
-    t0 = time.monotonic()
-    while pids and p.poll() is None and time.monotonic() - t0 < STALL_LIMIT_S:
-        shown = [float(x) for x in re.findall(r"clock held ([\d.]+) s for the recorder$", "".join(tail.lines()),
-                                              re.MULTILINE)]
-        if time.monotonic() - t0 >= STALL_S and shown and max(shown) >= need_s:
-            break
-        time.sleep(0.2)
-    for pid in pids:
-        os.kill(pid, signal.SIGCONT)
-    return reached, pids
+    try:
+        t0 = time.monotonic()
+        while pids and p.poll() is None and time.monotonic() - t0 < STALL_LIMIT_S:
+            shown = [float(x) for x in re.findall(r"clock held ([\d.]+) s for the recorder$", "".join(tail.lines()),
+                                                  re.MULTILINE)]
+            if time.monotonic() - t0 >= STALL_S and shown and max(shown) >= need_s:
+                break
+            time.sleep(0.2)
+    finally:
+        for pid in pids:
+            os.kill(pid, signal.SIGCONT)
+    return reached, pids, max(shown, default=0.0)
 
 
 def _recorder_stall(tmp: Path, hold_s: float | None = None) -> dict:
     """SIGSTOP of the recorder actor mid-flight until the clock has waited for it (:func:`_stop_recorder_until_held`),
     then SIGCONT. ``hold_s``: the run's ``--recorder-hold`` (None: the default, longer than the stall: the simulated
     clock waits and nothing is lost; shorter: the recorder stays stopped until it is spent, frames are shed past it
-    and the run ends ``recording_lost``). Clean when the outcome tells the file's truth and the summary says how long
-    the clock was held exactly when it was."""
+    and the run ends ``recording_lost``). Clean when the live progress showed the hold while the recorder was
+    stopped, the outcome tells the file's truth and the summary says how long the clock was held exactly when it
+    was."""
     rec = tmp / "run.mcap"
     hold = [] if hold_s is None else ["--recorder-hold", f"{hold_s:g}"]
     p = run_cli(["run", str(REPO_APPS / "farm_survey.py"), "--record", str(rec), "--speedup", "2", *hold],
                 start_new_session=True)
     tail = OutputTail(p)
-    reached, pids = _stop_recorder_until_held(p, rec, tail, 1.5 if hold_s is None else hold_s)
+    need = 1.5 if hold_s is None else hold_s
+    reached, pids, shown = _stop_recorder_until_held(p, rec, tail, need)
     out = tail.finish(900)
     said_held = re.findall(r"simulated clock held ([\d.]+) s for the recorder", out)
-    res = accounting_verdict(p, out, rec, reached and len(pids) == 1, bool(said_held),
-                             ("recorder actor stopped until the clock waited" if pids else "recorder actor not found")
+    res = accounting_verdict(p, out, rec, reached and len(pids) == 1 and shown >= need, bool(said_held),
+                             (f"recorder actor stopped until the live progress showed the clock held {shown:g} s"
+                              if pids else "recorder actor not found")
                              + f"; the summary says the clock was held {', '.join(said_held) or 'never'} s")
     res["held_s"] = [float(x) for x in said_held]
     return res

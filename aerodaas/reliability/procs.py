@@ -34,9 +34,11 @@ def mcap_reader_ok(path: str | Path) -> tuple[bool, int, str]:
 
 
 def run_cli(args: list[str], env: dict | None = None, **kw: Any) -> subprocess.Popen:
-    """``python -m aerodaas.cli ARGS`` as a child process (stdout and stderr merged, text), ``env`` over ours."""
+    """``python -m aerodaas.cli ARGS`` as a child process (stdout and stderr merged, text: bytes that are not text
+    in the locale's encoding read as U+FFFD), ``env`` over ours."""
     return subprocess.Popen([sys.executable, "-m", "aerodaas.cli", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env={**os.environ, **(env or {})}, **kw)
+                            stderr=subprocess.STDOUT, text=True, errors="replace", env={**os.environ, **(env or {})},
+                            **kw)
 
 
 class OutputTail:
@@ -58,13 +60,17 @@ class OutputTail:
         return list(self._lines)
 
     def finish(self, timeout_s: float) -> str:
-        """Everything the process printed, once it ended (killed after ``timeout_s`` s)."""
+        """Everything the process printed, once it ended (the process alone killed after ``timeout_s`` s). What it
+        printed is complete once every process holding its output has closed it; a descendant that keeps it open
+        (a Ray process left behind) cuts the read 30 s after the process ended."""
         try:
             self.proc.wait(timeout=timeout_s)
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.proc.wait()
         self._reader.join(timeout=30)
+        if not self._reader.is_alive():
+            self.proc.stdout.close()
         return "".join(self._lines)
 
 

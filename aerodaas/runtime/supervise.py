@@ -278,12 +278,12 @@ def progress_lines(handles: dict, t0: float) -> list[str]:
                     dets += f" (cloud {cloud})"
         x, y, z = st["position"]
         link = "" if st.get("link_ok", True) else " LINK LOST"
-        if st.get("clock_held_s"):  # a simulated run's clock has waited for its recorder (recorder_hold_s)
-            link += f" clock held {st['clock_held_s']:.1f} s for the recorder"
+        # a simulated run's clock has waited for its recorder (recorder_hold_s), in all so far (wall s)
+        held = f" clock held {st['clock_held_s']:.1f} s for the recorder" if st.get("clock_held_s", 0) >= 0.05 else ""
         cam = f" camera {fps:5.1f} FPS dropped {st['frames_dropped_at_camera']}" if st.get("cameras", 1) else ""
         lines.append(f"[{rid}] t={st['t']:6.1f}s {st['state']:<13} waypoint "
                      f"{waypoint_count(st['visited'], st['preplanned_total'], st.get('preplanned_reached'))} "
-                     f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {pct(st['battery_pct'])}{cam}{dets}{link}")
+                     f"pos=({x:6.1f},{y:6.1f},{z:5.1f}) battery {pct(st['battery_pct'])}{cam}{dets}{link}{held}")
     return lines
 
 

@@ -257,7 +257,7 @@ def test_mission_upload_start(session, autopilot):
     """`aerodaas mission upload FILE --start --max-speed 2` on the landed vehicle: uploaded with a DO_CHANGE_SPEED 2 m/s
     inserted after the take-off (said; ArduCopter's whole seconds and centimetres said too), armed, flown by the
     autopilot at no more than that + 10 % (an observer on the link sees the vehicle reach both waypoints: within 1 m
-    on ArduCopter, at 2 m; on PX4 within its own reached check's radius, :data:`PX4_NAV_ACC_RAD_M`) and landed. The
+    on ArduCopter, in 3D; on PX4 within its own reached check's radius, :data:`PX4_NAV_ACC_RAD_M`) and landed. The
     speed: the estimate's velocity on ArduCopter; on stock PX4 SIH, whose position estimate stalls and catches up
     (one run: 6 m in 2 s, 3.7 m/s, over 4 s 1.97 m/s), the distance the estimate moved over every >= 4 s of vehicle
     time (:func:`test_speed_stays_within_the_limit`). On PX4 this catches a runaway, not a missing cap: on these 6 m

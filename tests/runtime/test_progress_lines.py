@@ -30,7 +30,7 @@ def _status(held_s: float) -> dict:
             "frames": 30, "frames_dropped_at_camera": 2, "outcome": None, "link_ok": True}
 
 
-@pytest.mark.parametrize("held_s, said", [(0.0, None), (7.25, "7.2"), (19.96, "20.0")])
+@pytest.mark.parametrize("held_s, said", [(0.0, None), (0.03, None), (7.25, "7.2"), (19.96, "20.0")])
 def test_the_progress_line_says_how_long_the_clock_has_waited_for_the_recorder(ray_session, held_s, said):
     from aerodaas.runtime.supervise import progress_lines
 
