@@ -8,9 +8,8 @@ import threading
 from typing import Any, Callable, Literal
 
 from aerodaas.model.geo import geodetic_to_enu
-from aerodaas.backends.base import BackendError
+from aerodaas.backends.base import BackendError, LinkLost
 from aerodaas.missionfile import MissionItem, MissionPlan, expand_items, navigation_to_plan
-from aerodaas.missionfile.plan_ids import plan_id
 from aerodaas.missionfile.upload import mission_differences
 from aerodaas.model.types import ActionCommand, AeroNavigation, NavigationType, SchedulingType, Waypoint
 from aerodaas.backends.mavlink._common import M, _f32, _GLOBAL_FRAMES
@@ -29,9 +28,6 @@ _RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE
 #: horizontal metres from a mission waypoint at which the vehicle counts as arrived (its hold begins): ArduPilot at
 #: most this, PX4 the item's own acceptance radius (see AutopilotMission._remember_waypoints); without one, this
 _ARRIVAL_RADIUS_M = 0.5
-#: wall seconds a start waits at most for a MISSION_CURRENT that reports the uploaded mission's id: three of the
-#: 1 Hz (vehicle time) we ask for (_common.py)
-_PLAN_ID_WAIT_S = 3.0
 
 
 def reports_the_running_mission(mission_state: int, mode: str) -> bool:
@@ -96,8 +92,6 @@ class AutopilotMission:
         self._started = False  # start() was called since the last upload
         self._live = False  # ... and a MISSION_CURRENT said the mission runs: the reports are its progress
         self._plan_id = 0  # the id the vehicle gave our uploaded mission (MISSION_ACK.opaque_id); 0: none given
-        self._reported_plan_id = 0  # the id in the latest MISSION_CURRENT (mission_id)
-        self._reported = threading.Event()  # a MISSION_CURRENT came since the start cleared it
         link.handle("MISSION_CURRENT", self.on_mission_current)
         link.handle("MISSION_ITEM_REACHED", self.on_mission_item_reached)
         telemetry.notify_positions(self)
@@ -318,7 +312,7 @@ class AutopilotMission:
         (:attr:`OffboardControl.in_control`). Progress arrives as ``mission_current`` / ``mission_item_reached``
         events. Raises CredentialsRefused on an unsigned link when ``mavlink.require_signing``
         (:class:`SignedOnly`); BackendError when the vehicle holds another mission than the one uploaded
-        (:meth:`_check_plan_id`; nothing is sent); as :meth:`CommandProtocol.command_long` /
+        (:meth:`_check_plan_id`; no command is sent); as :meth:`CommandProtocol.command_long` /
         :meth:`CommandProtocol.set_mode`."""
         self._signed.require("start_mission")
         self._check_plan_id()
@@ -340,33 +334,35 @@ class AutopilotMission:
         self._commands.set_mode("LOITER")
 
     def _check_plan_id(self) -> None:
-        """Where the vehicle gave our uploaded mission a plan id (PX4: MISSION_ACK.opaque_id), its MISSION_CURRENT
-        must report that id (``mission_id``) before the start: PX4 can replace a mission it accepted and we read
-        back (a mission state its navigator publishes with another id, ``MavlinkMissionManager::
-        check_active_mission``; a ground station's upload), and MISSION_START / AUTO.MISSION would fly that one.
-        Only a MISSION_CURRENT received from now on counts, waited for up to :data:`_PLAN_ID_WAIT_S` (one report
-        period: up to 1 s at PX4's rate), since PX4 announces a new mission at once on the link that uploaded it only
-        and streams MISSION_CURRENT at 1 Hz per link (``MavlinkMissionManager::send``, its ``_slow_rate_limiter``),
-        so our link's last report may predate another station's upload by up to a second; also for a resume (a
-        start again without an upload). Raises BackendError naming both ids, or saying that no MISSION_CURRENT
-        came (a link that filters it cannot confirm the mission)."""
+        """Where the vehicle gave our uploaded mission a plan id (PX4: MISSION_ACK.opaque_id), it must still hold
+        that mission before the start: PX4 can replace a mission it accepted and we read back (a mission state its
+        navigator publishes with another id, ``MavlinkMissionManager::check_active_mission``; another ground
+        station's upload), and MISSION_START / AUTO.MISSION would fly that one. The vehicle is asked, twice
+        (:meth:`MissionTransfer.held_plan_id`), not its periodic MISSION_CURRENT believed: PX4 streams that at 1 Hz
+        per link and announces a new mission at once only on the link that uploaded it, so a report handled now may
+        have left the vehicle before another station's upload; and the mission protocol carries no request id, so
+        an answer to an earlier request arriving late could pass for the answer (asked twice, it is at most one of
+        the two, and both must name our mission). Another station's upload still under way when asked is not seen:
+        the vehicle changes the id once it accepts that upload. Also for a resume (a start again without an
+        upload). Raises BackendError naming both ids, or saying that the vehicle did not answer; LinkLost."""
         with self._lock:
             ours = self._plan_id
-            self._reported.clear()
         if not ours:
             return
-        came = self._reported.wait(_PLAN_ID_WAIT_S)
-        with self._lock:
-            reported = self._reported_plan_id
-        if came and reported == ours:
-            return
-        if not came:
-            raise BackendError(f"robot {self.robot_id!r}: start_mission: no MISSION_CURRENT from the vehicle within "
-                               f"{_PLAN_ID_WAIT_S:g} s to confirm that it holds the mission uploaded (mission id "
-                               f"{ours}); not started")
-        raise BackendError(f"robot {self.robot_id!r}: start_mission: the vehicle reports mission id {reported}, not "
-                           f"{ours}, the id it gave the mission uploaded: another mission replaced it; not started "
-                           f"(upload the mission again)")
+        held = []
+        for _ in range(2):
+            try:
+                held.append(self._transfers.held_plan_id("start_mission: mission id check"))
+            except LinkLost:
+                raise
+            except BackendError as e:
+                raise BackendError(f"{e}: cannot confirm that the vehicle holds the mission uploaded (mission id "
+                                   f"{ours}); not started") from e
+        other = next((h for h in held if h != ours), None)
+        if other is not None:
+            raise BackendError(f"robot {self.robot_id!r}: start_mission: the vehicle reports mission id {other}, not "
+                               f"{ours}, the id it gave the mission uploaded: another mission replaced it; not "
+                               f"started (upload the mission again)")
 
     # ------------------------------------------------------------------ progress (the I/O thread, under the lock)
     def on_position(self) -> None:
@@ -377,9 +373,7 @@ class AutopilotMission:
 
     def on_mission_current(self, msg: Any) -> None:
         """MISSION_CURRENT: the autopilot's current item, from the first one that says the started mission runs
-        (see the class); its plan id for :meth:`_check_plan_id`. Caller holds the backend's lock (the I/O thread)."""
-        self._reported_plan_id = plan_id(msg)
-        self._reported.set()
+        (see the class). Caller holds the backend's lock (the I/O thread)."""
         if not self._live:
             ours = self._started or not self._uploaded
             if not (ours and reports_the_running_mission(getattr(msg, "mission_state", 0) or 0, self._link.mode)):

@@ -4,11 +4,13 @@ mission (:mod:`.mission`), the fence and rally points (:mod:`.fence`). A concern
 :class:`~aerodaas.backends.mavlink.MavlinkBackend`."""
 from __future__ import annotations
 
+import contextlib
 import queue
+import threading
 import time
 from typing import Any, Callable
 
-from aerodaas.backends.base import BackendError, CommandRefused
+from aerodaas.backends.base import BackendError, CommandRefused, LinkLost
 from aerodaas.backends.mavlink._common import M, _enum_name, _f32
 from aerodaas.backends.mavlink.link import MavlinkLink
 from aerodaas.backends.mavlink.statustext import StatusTexts
@@ -40,13 +42,16 @@ class MissionTransfer:
         self.robot_id, self._settings, self._link, self._texts, self._event = robot_id, settings, link, texts, event
         self._queue: queue.Queue = queue.Queue()
         self._active = False
+        self._gate = threading.Lock()  # _active and the queue change together (offer on the I/O thread)
         link.serve_mission_protocol(self)
 
     def offer(self, msg: Any) -> None:
         """A mission message from the vehicle (MISSION_REQUEST(_INT), MISSION_ACK, MISSION_COUNT,
         MISSION_ITEM(_INT)): kept for the exchange under way when it is addressed to us; dropped otherwise."""
-        if self._active and getattr(msg, "target_system", 0) in (0, self._settings.source_system):
-            self._queue.put(msg)
+        if getattr(msg, "target_system", 0) in (0, self._settings.source_system):
+            with self._gate:
+                if self._active:
+                    self._queue.put(msg)
 
     def upload_mission(self, wire: list[tuple]) -> int:
         """The upload transfer of the mission's ``wire`` items (frame, command, autocontinue, param1-4, x, y, z)
@@ -98,13 +103,14 @@ class MissionTransfer:
         returns True; after ``command_timeout_s`` without progress ``resend(state["last"])`` up to
         ``command_retries`` times (only a message that advances the exchange, i.e. changes ``state``, resets the
         count, so a vehicle answering with something we do not use cannot keep it going for ever)."""
-        while True:
-            try:
-                self._queue.get_nowait()
-            except queue.Empty:
-                break
+        with self._gate:
+            while True:
+                try:
+                    self._queue.get_nowait()
+                except queue.Empty:
+                    break
+            self._active = True
         state: dict[str, Any] = {"last": None, "max": -1, "start": time.monotonic()}
-        self._active = True
         try:
             begin()
             retries = 0
@@ -133,7 +139,8 @@ class MissionTransfer:
                     retries = 0
                     deadline = time.monotonic() + self._settings.command_timeout_s
         finally:
-            self._active = False
+            with self._gate:
+                self._active = False
 
     def download_messages(self, mission_type: int, what: str) -> dict[int, Any]:
         """The mission protocol's download of the items of ``mission_type`` (0 mission, 1 fence, 2 rally; MAVLink
@@ -176,6 +183,42 @@ class MissionTransfer:
         self._transaction(what, begin, resend, on_msg)
         self._link.send(lambda mav: mav.mission_ack_send(*self._link.target, M.MAV_MISSION_ACCEPTED, mission_type))
         return got
+
+    def held_plan_id(self, what: str) -> int:
+        """The plan id of the mission the vehicle holds now, asked of it: MISSION_REQUEST_LIST, whose MISSION_COUNT
+        carries it (``opaque_id``, :func:`~aerodaas.missionfile.plan_ids.plan_id`; 0: none given or no mission).
+        Our MISSION_ACK then ends the download, also when no answer came: ACCEPTED for an empty one, else
+        OPERATION_CANCELLED (mavlink.io mission protocol, "Canceling Operations"; PX4 returns to idle on either,
+        ``MavlinkMissionManager::handle_mission_ack``, and until then refuses an upload on this link as busy). The
+        answer is the vehicle's state after our request reached it, unlike a periodic report that may have been sent
+        before; PX4 answers from the id all its links share (``_crc32``), so an upload over another link counts.
+        Raises BackendError when ``command_retries`` + 1 requests of ``command_timeout_s`` s each go unanswered
+        (named ``what``), LinkLost."""
+        self._link.check_link(what)
+        mission = M.MAV_MISSION_TYPE_MISSION
+        state: dict[str, Any] = {}
+
+        def begin() -> None:
+            self._link.send(lambda mav: mav.mission_request_list_send(*self._link.target, mission))
+
+        def on_msg(msg: Any, progress: dict) -> bool:
+            if msg.get_type() == "MISSION_COUNT" and getattr(msg, "mission_type", 0) == mission:
+                state["count"], state["plan_id"] = msg.count, plan_id(msg)
+                return True
+            return False
+
+        def end() -> None:
+            result = M.MAV_MISSION_ACCEPTED if state.get("count") == 0 else M.MAV_MISSION_OPERATION_CANCELLED
+            self._link.send(lambda mav: mav.mission_ack_send(*self._link.target, result, mission))
+
+        try:
+            self._transaction(what, begin, lambda _last: begin(), on_msg)
+        except BackendError:
+            with contextlib.suppress(LinkLost):  # the error raised says more than a lost link here
+                end()
+            raise
+        end()
+        return state["plan_id"]
 
     def clear_mission(self) -> None:
         """MISSION_CLEAR_ALL; waits for MISSION_ACK. Raises CommandRefused / BackendError / LinkLost."""
